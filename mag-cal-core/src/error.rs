@@ -1,0 +1,67 @@
+//! The one error type of the crate.
+
+use core::fmt;
+
+/// Why a calibration was refused.
+///
+/// Every input, however malformed, ends either in a calibration or in one of
+/// these values; the core never panics. The enum is `Copy` and small so that
+/// firmware can log or store it without ceremony.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// Fewer usable (finite) samples than the fit needs.
+    TooFewSamples {
+        /// Finite samples found.
+        found: usize,
+        /// Samples required.
+        required: usize,
+    },
+    /// Every finite sample is the same point: there is no spread to fit.
+    AllSamplesEqual,
+    /// The samples' spread cannot be represented in the working precision:
+    /// squares overflow (values near `1e30` in `f32`), or the spread is
+    /// subnormal and carries too few significant bits.
+    OutOfRange,
+    /// The fitted quadric is not an ellipsoid (its matrix `M` is not
+    /// positive definite), e.g. for planar or otherwise degenerate motion.
+    NotAnEllipsoid,
+    /// A linear system of the fit is singular: the samples do not determine
+    /// the parameters (coplanar or collinear directions, duplicated points).
+    SingularSystem,
+    /// An iterative solver hit its iteration cap before its stop criteria.
+    NoConvergence {
+        /// Iterations performed.
+        iterations: u32,
+    },
+    /// A fixed-capacity sample store is full.
+    CapacityExceeded,
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::TooFewSamples { found, required } => write!(
+                f,
+                "too few usable samples: {found} finite, at least {required} required"
+            ),
+            Error::AllSamplesEqual => f.write_str("all samples are equal: no spread to fit"),
+            Error::OutOfRange => f.write_str(
+                "sample spread outside the range of the working precision (overflow or subnormal)",
+            ),
+            Error::NotAnEllipsoid => {
+                f.write_str("the fitted quadric is not an ellipsoid (degenerate or planar motion)")
+            }
+            Error::SingularSystem => {
+                f.write_str("singular system: the samples do not determine the calibration")
+            }
+            Error::NoConvergence { iterations } => {
+                write!(f, "solver did not converge within {iterations} iterations")
+            }
+            Error::CapacityExceeded => f.write_str("sample store is full"),
+        }
+    }
+}
+
+impl core::error::Error for Error {}

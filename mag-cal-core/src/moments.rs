@@ -1,0 +1,147 @@
+//! The 35 moments of the normalised samples (design document, section 3).
+//!
+//! The LS scatter matrix `S = sum phi phi^T` of the design row
+//! `phi(x) = [x^2, y^2, z^2, 2xy, 2xz, 2yz, 2x, 2y, 2z, 1]` has only 35
+//! distinct entries: the sums `sum x^p y^q z^r` with `p + q + r <= 4`. They
+//! are accumulated in one pass; the `n x 10` design matrix is never stored.
+
+use nalgebra::SMatrix;
+
+use crate::normalize::Normalization;
+use crate::sample::{finite, Sample};
+use crate::Real;
+
+/// Number of monomials `x^p y^q z^r` with `p + q + r <= 4`.
+pub const COUNT: usize = 35;
+
+/// Samples summed into a block accumulator before it is added to the total.
+/// Blocked summation keeps the rounding error of `f32` sums growing with
+/// `n / BLOCK + BLOCK` instead of `n`, for one extra add per moment per block.
+pub(crate) const BLOCK: usize = 128;
+
+/// Exponents `(p, q, r)` of each moment, ordered by total degree.
+pub const EXPONENTS: [[u8; 3]; COUNT] = exponents();
+
+const fn exponents() -> [[u8; 3]; COUNT] {
+    let mut out = [[0u8; 3]; COUNT];
+    let mut k = 0;
+    let mut degree = 0u8;
+    while degree <= 4 {
+        let mut p = degree as i8;
+        while p >= 0 {
+            let mut q = (degree as i8) - p;
+            while q >= 0 {
+                let r = degree as i8 - p - q;
+                out[k] = [p as u8, q as u8, r as u8];
+                k += 1;
+                q -= 1;
+            }
+            p -= 1;
+        }
+        degree += 1;
+    }
+    out
+}
+
+/// `INDEX[p][q][r]`: position of `x^p y^q z^r` in [`EXPONENTS`] (only
+/// meaningful for `p + q + r <= 4`).
+const INDEX: [[[u8; 5]; 5]; 5] = index();
+
+const fn index() -> [[[u8; 5]; 5]; 5] {
+    let mut out = [[[0u8; 5]; 5]; 5];
+    let mut k = 0;
+    while k < COUNT {
+        let [p, q, r] = EXPONENTS[k];
+        out[p as usize][q as usize][r as usize] = k as u8;
+        k += 1;
+    }
+    out
+}
+
+/// The monomials of the design row: exponents and the constant factor.
+const PHI: [([u8; 3], u8); 10] = [
+    ([2, 0, 0], 1),
+    ([0, 2, 0], 1),
+    ([0, 0, 2], 1),
+    ([1, 1, 0], 2),
+    ([1, 0, 1], 2),
+    ([0, 1, 1], 2),
+    ([1, 0, 0], 2),
+    ([0, 1, 0], 2),
+    ([0, 0, 1], 2),
+    ([0, 0, 0], 1),
+];
+
+/// The 35 power sums of the normalised samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Moments<T: Real> {
+    /// `sums[k] = sum x^p y^q z^r` with `[p, q, r] = EXPONENTS[k]`.
+    pub sums: [T; COUNT],
+}
+
+impl<T: Real> Moments<T> {
+    /// One pass over the finite samples, normalised by `norm`.
+    pub fn accumulate<S: Sample>(samples: &[S], norm: &Normalization<T>) -> Self {
+        let mut total = [T::zero(); COUNT];
+        for block in samples.chunks(BLOCK) {
+            let mut acc = [T::zero(); COUNT];
+            for y in block.iter().filter_map(finite::<T, S>) {
+                add_sample(&mut acc, &norm.forward(y).into());
+            }
+            for (t, a) in total.iter_mut().zip(acc) {
+                *t += a;
+            }
+        }
+        Self { sums: total }
+    }
+
+    /// `sum x^p y^q z^r`.
+    #[inline]
+    pub fn get(&self, p: u8, q: u8, r: u8) -> T {
+        let k = INDEX[usize::from(p) % 5][usize::from(q) % 5][usize::from(r) % 5];
+        self.sums[usize::from(k) % COUNT]
+    }
+
+    /// The 10x10 scatter matrix `S = sum phi phi^T`, assembled from the
+    /// moments.
+    pub fn scatter(&self) -> SMatrix<T, 10, 10> {
+        SMatrix::from_fn(|i, j| {
+            let (ei, ki) = PHI[i];
+            let (ej, kj) = PHI[j];
+            let m = self.get(ei[0] + ej[0], ei[1] + ej[1], ei[2] + ej[2]);
+            m * T::from_count(usize::from(ki * kj))
+        })
+    }
+}
+
+/// Adds one normalised sample's monomials to the accumulator.
+#[inline]
+fn add_sample<T: Real>(acc: &mut [T; COUNT], x: &[T; 3]) {
+    let one = T::one();
+    let pow = |v: T| {
+        let v2 = v * v;
+        [one, v, v2, v2 * v, v2 * v2]
+    };
+    let (px, py, pz) = (pow(x[0]), pow(x[1]), pow(x[2]));
+    for (a, [p, q, r]) in acc.iter_mut().zip(EXPONENTS) {
+        *a += px[usize::from(p) % 5] * py[usize::from(q) % 5] * pz[usize::from(r) % 5];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exponents_cover_every_monomial_once() {
+        let mut seen = [[[false; 5]; 5]; 5];
+        for [p, q, r] in EXPONENTS {
+            assert!(p + q + r <= 4);
+            assert!(!seen[p as usize][q as usize][r as usize]);
+            seen[p as usize][q as usize][r as usize] = true;
+        }
+        for (k, [p, q, r]) in EXPONENTS.iter().enumerate() {
+            assert_eq!(INDEX[*p as usize][*q as usize][*r as usize] as usize, k);
+        }
+    }
+}

@@ -1,0 +1,122 @@
+//! Raw samples: the element types the fit accepts, and a fixed-capacity store.
+
+use crate::{Error, Real};
+
+/// One raw three-axis reading, in whatever unit the sensor gives.
+///
+/// Implemented for `[f32; 3]`, `[f64; 3]`, `[i16; 3]` (the native output of
+/// most magnetometers: 6 bytes a sample) and `[i32; 3]`. Conversion to the
+/// working precision happens per sample inside each pass, so a store of `i16`
+/// never needs a floating-point copy.
+pub trait Sample: Copy {
+    /// The three components in the working precision. A value that does not
+    /// fit the working precision (an `f64` of `1e300` read as `f32`) becomes
+    /// non-finite and the sample is then skipped and counted as dropped.
+    fn xyz<T: Real>(&self) -> [T; 3];
+}
+
+impl Sample for [f32; 3] {
+    #[inline]
+    fn xyz<T: Real>(&self) -> [T; 3] {
+        self.map(T::from_single)
+    }
+}
+
+impl Sample for [f64; 3] {
+    #[inline]
+    fn xyz<T: Real>(&self) -> [T; 3] {
+        self.map(T::lit)
+    }
+}
+
+impl Sample for [i16; 3] {
+    #[inline]
+    fn xyz<T: Real>(&self) -> [T; 3] {
+        self.map(|v| T::from_single(f32::from(v)))
+    }
+}
+
+impl Sample for [i32; 3] {
+    /// Exact up to `2^24` in `f32`; larger counts round to nearest.
+    #[inline]
+    fn xyz<T: Real>(&self) -> [T; 3] {
+        self.map(|v| T::lit(f64::from(v)))
+    }
+}
+
+/// Finite components of a sample, or `None` when any is NaN or infinite.
+#[inline]
+pub(crate) fn finite<T: Real, S: Sample>(sample: &S) -> Option<[T; 3]> {
+    let v = sample.xyz::<T>();
+    if v[0].is_finite() && v[1].is_finite() && v[2].is_finite() {
+        Some(v)
+    } else {
+        None
+    }
+}
+
+/// A fixed-capacity store for firmware that collects samples one at a time.
+///
+/// Capacity is the const generic `N`; the memory is `N * size_of::<S>()`
+/// bytes inline, no heap. A full store refuses further samples with
+/// [`Error::CapacityExceeded`] instead of panicking.
+///
+/// ```
+/// use mag_cal_core::SampleStore;
+/// let mut store: SampleStore<[i16; 3], 2> = SampleStore::new();
+/// store.push([1, 2, 3]).unwrap();
+/// store.push([4, 5, 6]).unwrap();
+/// assert!(store.is_full());
+/// assert!(store.push([7, 8, 9]).is_err());
+/// assert_eq!(store.as_slice().len(), 2);
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct SampleStore<S, const N: usize> {
+    samples: heapless::Vec<S, N>,
+}
+
+impl<S: Sample, const N: usize> SampleStore<S, N> {
+    /// An empty store.
+    pub const fn new() -> Self {
+        Self {
+            samples: heapless::Vec::new(),
+        }
+    }
+
+    /// Appends one sample, or returns [`Error::CapacityExceeded`] when full.
+    pub fn push(&mut self, sample: S) -> Result<(), Error> {
+        self.samples
+            .push(sample)
+            .map_err(|_| Error::CapacityExceeded)
+    }
+
+    /// The stored samples, oldest first: what [`crate::calibrate`] takes.
+    pub fn as_slice(&self) -> &[S] {
+        &self.samples
+    }
+
+    /// Number of stored samples.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Whether the store holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Whether the store is at capacity.
+    pub fn is_full(&self) -> bool {
+        self.samples.is_full()
+    }
+
+    /// The capacity `N`.
+    pub const fn capacity(&self) -> usize {
+        N
+    }
+
+    /// Removes every sample.
+    pub fn clear(&mut self) {
+        self.samples.clear();
+    }
+}

@@ -1,0 +1,152 @@
+//! End-to-end behaviour of `calibrate` against generated truth.
+
+use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
+use mag_cal_core::{calibrate, Config, Error, LsVariant, Method};
+
+/// Unit directions on a Fibonacci sphere.
+fn directions(n: usize) -> Vec<Vector3<f64>> {
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = i as f64 * 2.399_963_229_728_653;
+            Vector3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// A distortion with distinct singular values and a rotation.
+fn truth(scale: f64) -> (Matrix3<f64>, Vector3<f64>) {
+    let r = Rotation3::from_euler_angles(0.3, -0.2, 0.5);
+    let t = r.matrix() * Matrix3::from_diagonal(&Vector3::new(1.25, 0.85, 1.05)) * scale;
+    (t, Vector3::new(0.3, -0.2, 0.1) * scale * 3.0)
+}
+
+fn samples(t: &Matrix3<f64>, b: &Vector3<f64>, n: usize) -> Vec<[f64; 3]> {
+    directions(n).iter().map(|h| (t * h + b).into()).collect()
+}
+
+fn rel_err_m(fit_m: &Matrix3<f64>, t: &Matrix3<f64>) -> f64 {
+    let m = (t * t.transpose()).try_inverse().unwrap();
+    (fit_m - m).amax() / m.amax()
+}
+
+#[test]
+fn noise_free_recovery_every_variant_and_method_f64() {
+    let (t, b) = truth(1.0);
+    let y = samples(&t, &b, 500);
+    for ls in [LsVariant::Ls9, LsVariant::Svd10, LsVariant::LiGriffiths] {
+        for method in [Method::Ls, Method::Adc2] {
+            let cfg = Config {
+                method,
+                ls,
+                ..Config::default()
+            };
+            let fit = calibrate::<f64, _>(&y, &cfg).unwrap();
+            let c = fit.calibration;
+            let em = rel_err_m(&c.shape(), &t);
+            let eb = (c.hard_iron() - b).amax();
+            println!(
+                "{ls:?} {method:?}: eM {em:.2e} eb {eb:.2e} it {} rms {:.2e}",
+                fit.report.iterations, fit.report.radial_rms
+            );
+            assert!(em < 1e-9 && eb < 1e-9, "{ls:?} {method:?}: {em} {eb}");
+            let rho = t.determinant().abs().cbrt();
+            assert!((c.field_strength() - rho).abs() < 1e-9 * rho);
+        }
+    }
+}
+
+#[test]
+fn f32_with_large_offset() {
+    let t = Matrix3::from_diagonal(&Vector3::new(2000.0, 1800.0, 2100.0));
+    let b = Vector3::new(25000.0, -25000.0, 25000.0);
+    let y: Vec<[f32; 3]> = directions(1000)
+        .iter()
+        .map(|h| {
+            let v = t * h + b;
+            [v.x as f32, v.y as f32, v.z as f32]
+        })
+        .collect();
+    for ls in [LsVariant::Ls9, LsVariant::Svd10, LsVariant::LiGriffiths] {
+        let fit = calibrate::<f32, _>(
+            &y,
+            &Config {
+                ls,
+                ..Config::default()
+            },
+        )
+        .unwrap();
+        let c = fit.calibration;
+        let m = c.shape().map(f64::from);
+        let em = rel_err_m(&m, &t);
+        let eb = (c.hard_iron().map(f64::from) - b).amax() / 2000.0;
+        println!(
+            "f32 {ls:?}: eM {em:.2e} eb {eb:.2e} it {}",
+            fit.report.iterations
+        );
+        assert!(em < 1e-4 && eb < 1e-4, "{ls:?}: {em} {eb}");
+    }
+}
+
+#[test]
+fn errors() {
+    let cfg = Config::default();
+    let few = vec![[1.0f64, 2.0, 3.0]; 5];
+    assert_eq!(
+        calibrate::<f64, _>(&few, &cfg).unwrap_err(),
+        Error::TooFewSamples {
+            found: 5,
+            required: 10
+        }
+    );
+    let same = vec![[1.0f64, 2.0, 3.0]; 50];
+    assert_eq!(
+        calibrate::<f64, _>(&same, &cfg).unwrap_err(),
+        Error::AllSamplesEqual
+    );
+    let nan = vec![[f64::NAN, 2.0, 3.0]; 50];
+    assert_eq!(
+        calibrate::<f64, _>(&nan, &cfg).unwrap_err(),
+        Error::TooFewSamples {
+            found: 0,
+            required: 10
+        }
+    );
+    let (t, b) = truth(1e30);
+    let huge: Vec<[f32; 3]> = samples(&t, &b, 100)
+        .iter()
+        .map(|v| v.map(|x| x as f32))
+        .collect();
+    assert_eq!(
+        calibrate::<f32, _>(&huge, &cfg).unwrap_err(),
+        Error::OutOfRange
+    );
+    let (t, b) = truth(1e-40);
+    let tiny: Vec<[f32; 3]> = samples(&t, &b, 100)
+        .iter()
+        .map(|v| v.map(|x| x as f32))
+        .collect();
+    assert_eq!(
+        calibrate::<f32, _>(&tiny, &cfg).unwrap_err(),
+        Error::OutOfRange
+    );
+    // a planar circle
+    let planar: Vec<[f64; 3]> = (0..100)
+        .map(|i| {
+            let a = i as f64 * 0.0628;
+            [a.cos(), a.sin(), 0.0]
+        })
+        .collect();
+    let e = calibrate::<f64, _>(&planar, &cfg).unwrap_err();
+    println!("planar: {e}");
+    assert!(matches!(e, Error::NotAnEllipsoid | Error::SingularSystem));
+}
+
+#[test]
+fn huge_values_work_in_f64() {
+    let (t, b) = truth(1e30);
+    let y = samples(&t, &b, 300);
+    let fit = calibrate::<f64, _>(&y, &Config::default()).unwrap();
+    assert!(rel_err_m(&fit.calibration.shape(), &t) < 1e-9);
+}
