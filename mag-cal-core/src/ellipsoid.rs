@@ -87,9 +87,10 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// `L^-1 C1 L^-T w = mu w`, `mu = 1 / lambda`, `v1 = L^-T w`. `Red` is
 /// positive semi-definite and `C1` has one positive eigenvalue, so exactly
 /// one `mu` is positive: the largest. Noise-free data make `Red` singular
-/// (the exact quadric is its null vector, `lambda = 0`); a ridge of a few
-/// ulps of its trace keeps the Cholesky defined and moves the solution by
-/// the same relative amount.
+/// (the exact quadric is its null vector, `lambda = 0`): only when the
+/// Cholesky fails, a ridge of 16 ulps of its trace keeps it defined and moves
+/// the solution by about that relative amount. (Always adding the ridge cost
+/// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s11: SMatrix<T, 6, 6> = s.fixed_view::<6, 6>(0, 0).into_owned();
     let s12: SMatrix<T, 6, 4> = s.fixed_view::<6, 4>(0, 6).into_owned();
@@ -99,9 +100,15 @@ fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error
     let k = s22.solve(&s12.transpose());
     let red = s11 - s12 * k;
     let red = (red + red.transpose()) * T::lit(0.5);
-    let ridge = red.trace() * T::EPSILON * T::lit(16.0);
-    let red = red + SMatrix::<T, 6, 6>::identity() * ridge;
-    let l = Cholesky::new(red).ok_or(Error::SingularSystem)?.unpack();
+    let l = match Cholesky::new(red) {
+        Some(c) => c,
+        None => {
+            let ridge = red.trace() * T::EPSILON * T::lit(16.0);
+            Cholesky::new(red + SMatrix::<T, 6, 6>::identity() * ridge)
+                .ok_or(Error::SingularSystem)?
+        }
+    }
+    .unpack();
     let mut c1 = SMatrix::<T, 6, 6>::zeros();
     for i in 0..3 {
         for j in 0..3 {

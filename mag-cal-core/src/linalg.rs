@@ -25,9 +25,11 @@ where
     if !m.iter().all(|v| v.is_finite()) {
         return Err(Error::SingularSystem);
     }
-    SymmetricEigen::try_new(m, T::EPSILON, EIGEN_MAX_ITER).ok_or(Error::NoConvergence {
-        iterations: EIGEN_MAX_ITER as u32,
-    })
+    SymmetricEigen::<T, Const<D>>::try_new(m, T::EPSILON, EIGEN_MAX_ITER).ok_or(
+        Error::NoConvergence {
+            iterations: EIGEN_MAX_ITER as u32,
+        },
+    )
 }
 
 /// `V f(Lambda) V^T` for a symmetric positive definite 3x3 matrix, or

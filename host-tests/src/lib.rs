@@ -1,0 +1,5 @@
+//! Host-side test support for mag-cal.
+
+pub mod real;
+pub mod reference;
+pub mod sim;

@@ -1,0 +1,43 @@
+//! The third-party recordings in `shared/data/real/` (beside the repository),
+//! read in place: they are never copied into the repository.
+
+use std::path::PathBuf;
+
+/// Path of a recording in `../shared/data/real/`, relative to the workspace.
+pub fn path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/real")
+        .join(name)
+}
+
+/// Reads the numeric columns `cols` (0-based) of a CSV or whitespace
+/// separated file, skipping a header line and comments.
+pub fn read_columns(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
+    let p = path(name);
+    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
+        panic!(
+            "cannot read {} ({e}): is ../shared beside the repo?",
+            p.display()
+        )
+    });
+    text.lines()
+        .filter_map(|line| {
+            let fields: Vec<f64> = line
+                .split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|f| !f.is_empty())
+                .map(|f| f.parse::<f64>())
+                .collect::<Result<_, _>>()
+                .ok()?;
+            Some([
+                *fields.get(cols[0])?,
+                *fields.get(cols[1])?,
+                *fields.get(cols[2])?,
+            ])
+        })
+        .collect()
+}
+
+/// Reads the first three columns.
+pub fn read_xyz(name: &str) -> Vec<[f64; 3]> {
+    read_columns(name, [0, 1, 2])
+}
