@@ -17,10 +17,17 @@ pub enum LsVariant {
     #[default]
     Ls9,
     /// Coefficients = eigenvector of the smallest eigenvalue of the 10x10
-    /// scatter (closest to the paper's reference [4]).
+    /// scatter (closest to the paper's reference [4]). Its normalisation
+    /// `|v| = 1` counts each off-diagonal coefficient of the quadric once,
+    /// so unlike the other variants it is not rotation-equivariant: on noisy
+    /// data the fit depends slightly on the sensor frame.
     Svd10,
-    /// Li and Griffiths' ellipsoid-specific fit (`4J - I^2 = 1`), as used by
-    /// Magneto. The most biased under noise.
+    /// Li and Griffiths' ellipsoid-specific fit (`4J - I^2 = 1`, with
+    /// `I = tr A`, `J` the sum of the principal 2x2 minors of `A`), as used
+    /// by Magneto. The most biased under noise, and limited by its
+    /// constraint: an ellipsoid with `4J - I^2 <= 0` (elongated: e.g. semi-axes
+    /// 1.46, 1.07, 0.5) cannot be represented, so even noise-free samples of
+    /// it give a wrong ellipsoid (the report's radial RMS shows it).
     LiGriffiths,
 }
 
