@@ -232,7 +232,7 @@ mod tests {
             a: l * l.transpose(),
             b: Vector4::new(1.0, -2.0, 0.5, 3.0),
         };
-        let want = q.a.clone().lu().solve(&q.b).unwrap();
+        let want = q.a.lu().solve(&q.b).unwrap();
         let opts = BfgsOptions {
             step_tol: 1e-14,
             grad_tol: 1e-12,

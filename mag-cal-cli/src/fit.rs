@@ -1,0 +1,187 @@
+//! The `fit` subcommand: read, parse, calibrate (timed), report.
+
+use std::io::Write;
+use std::time::Instant;
+
+use mag_cal_core::{calibrate, Config, Real};
+use serde::Serialize;
+
+use crate::cli::{FitArgs, Format, Precision};
+use crate::error::CliError;
+use crate::input::{self, Source};
+use crate::output;
+
+/// The result of a fit, widened to `f64`: what both output formats print.
+///
+/// Serialised as the JSON object of `--format json`, in field order.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Outcome {
+    /// Method name (`ls`, `adc2`).
+    pub method: &'static str,
+    /// LS variant name (`ls9`, `svd10`, `lg10`).
+    pub ls: &'static str,
+    /// `f32` or `f64`.
+    pub precision: &'static str,
+    /// Finite samples the fit used.
+    pub samples_used: usize,
+    /// Non-finite samples it skipped.
+    pub samples_dropped: usize,
+    /// Hard-iron offset `b`, sensor units.
+    pub hard_iron: [f64; 3],
+    /// Soft-iron matrix `W`, rows; symmetric; `W (raw - b)` is on the unit
+    /// sphere.
+    pub soft_iron: [[f64; 3]; 3],
+    /// Local field strength `det(W)^(-1/3)`, sensor units.
+    pub field_strength: f64,
+    /// Quasi-Newton iterations (0 for `ls`).
+    pub iterations: u32,
+    /// Wall time of the `calibrate` call alone, microseconds.
+    pub timing_us: f64,
+    /// How well the calibration fits the samples.
+    pub quality: Quality,
+}
+
+/// Quality figures of a fit.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Quality {
+    /// RMS of `|W (y - b)| - 1` over the samples used (from the core).
+    pub radial_rms: f64,
+    /// Standard deviation over mean of `|W (y - b)|` over the samples used.
+    pub norm_spread: f64,
+}
+
+/// Runs `magcal fit`, writing the report to `out`.
+pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let source = Source::from_arg(&args.file);
+    let bytes = source.read()?;
+    let samples = input::parse(&bytes, args.columns.as_ref(), &source.name())?;
+    let config = Config {
+        method: args.method.to_core(),
+        ls: args.ls.to_core(),
+        ..Config::default()
+    };
+    let outcome = fit(&samples, &config, args.precision)?;
+    let report = match args.format {
+        Format::Text => output::text(&outcome, &source.name()),
+        Format::Json => output::json(&outcome),
+    };
+    out.write_all(report.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(CliError::Write)
+}
+
+/// Calibrates `samples` in the requested precision.
+pub fn fit(
+    samples: &[[f64; 3]],
+    config: &Config,
+    precision: Precision,
+) -> Result<Outcome, CliError> {
+    match precision {
+        Precision::F32 => fit_in::<f32>(samples, config, precision),
+        Precision::F64 => fit_in::<f64>(samples, config, precision),
+    }
+}
+
+/// One timed call of the core in precision `T` (named by `precision`), and
+/// the summary of its result.
+fn fit_in<T: Real>(
+    samples: &[[f64; 3]],
+    config: &Config,
+    precision: Precision,
+) -> Result<Outcome, CliError> {
+    let start = Instant::now();
+    let fit = calibrate::<T, [f64; 3]>(samples, config);
+    let elapsed = start.elapsed();
+    let fit = fit?;
+
+    let cal = &fit.calibration;
+    let b = cal.hard_iron();
+    let w = cal.soft_iron();
+    // The calibrated norms of the samples the core used (the finite ones in
+    // precision `T`), for the spread figure.
+    let norms = samples
+        .iter()
+        .map(|s| s.map(T::lit))
+        .filter(|y| y.iter().all(|v| v.is_finite()))
+        .map(|y| cal.apply(y).norm().to_f64());
+    Ok(Outcome {
+        method: fit.report.method.name(),
+        ls: fit.report.ls.name(),
+        precision: precision.name(),
+        samples_used: fit.report.samples_used,
+        samples_dropped: fit.report.samples_dropped,
+        hard_iron: [b.x, b.y, b.z].map(T::to_f64),
+        soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
+        field_strength: cal.field_strength().to_f64(),
+        iterations: fit.report.iterations,
+        timing_us: elapsed.as_secs_f64() * 1e6,
+        quality: Quality {
+            radial_rms: fit.report.radial_rms.to_f64(),
+            norm_spread: spread(norms),
+        },
+    })
+}
+
+/// Population standard deviation over mean of `values` (NaN when empty).
+fn spread(values: impl Iterator<Item = f64> + Clone) -> f64 {
+    let (n, sum) = values
+        .clone()
+        .fold((0usize, 0.0), |(n, s), v| (n + 1, s + v));
+    let mean = sum / n as f64;
+    let var = values.map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64;
+    var.sqrt() / mean
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mag_cal_core::Method;
+
+    /// Points on a shifted, stretched ellipsoid (a Fibonacci sphere).
+    fn ellipsoid(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = i as f64 * 2.399_963;
+                [
+                    300.0 + 40.0 * r * phi.cos(),
+                    -120.0 + 55.0 * r * phi.sin(),
+                    75.0 + 48.0 * z,
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn spread_of_constant_is_zero() {
+        assert_eq!(spread([2.0, 2.0, 2.0].into_iter()), 0.0);
+        assert!((spread([1.0, 3.0].into_iter()) - 0.5).abs() < 1e-15);
+        assert!(spread(std::iter::empty()).is_nan());
+    }
+
+    #[test]
+    fn fits_in_both_precisions() {
+        let mut samples = ellipsoid(200);
+        samples.push([f64::NAN, 0.0, 0.0]);
+        for (precision, tol) in [(Precision::F64, 1e-8), (Precision::F32, 1e-2)] {
+            let o = fit(&samples, &Config::default(), precision).expect("fits");
+            assert_eq!(o.precision, precision.name());
+            assert_eq!((o.method, o.ls), ("adc2", "ls9"));
+            assert_eq!((o.samples_used, o.samples_dropped), (200, 1));
+            assert!((o.hard_iron[0] - 300.0).abs() < tol, "{:?}", o.hard_iron);
+            assert!(o.quality.norm_spread < 1e-4 && o.quality.radial_rms < 1e-4);
+            assert!(o.timing_us >= 0.0);
+        }
+    }
+
+    #[test]
+    fn refusal_is_exit_3() {
+        let config = Config {
+            method: Method::Ls,
+            ..Config::default()
+        };
+        let err = fit(&[[1.0, 2.0, 3.0]; 20], &config, Precision::F64).unwrap_err();
+        assert_eq!(err.exit_code(), 3);
+    }
+}
