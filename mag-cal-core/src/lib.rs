@@ -75,6 +75,11 @@ pub mod quasi_newton;
 mod real;
 mod sample;
 
+/// The README's example runs as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+struct ReadmeDoctests;
+
 pub use calibration::Calibration;
 pub use ellipsoid::LsVariant;
 pub use error::Error;

@@ -48,7 +48,8 @@ fn sym_function<T: Real>(m: &Matrix3<T>, f: impl Fn(T) -> T) -> Result<Matrix3<T
     }
     let v = &eig.eigenvectors;
     let d = Vector3::from_fn(|i, _| f(eig.eigenvalues[i]));
-    Ok(v * Matrix3::from_diagonal(&d) * v.transpose())
+    // V D V^T is symmetric only to rounding; the canonical form is exactly so.
+    Ok((v * Matrix3::from_diagonal(&d) * v.transpose()).symmetrize_upper())
 }
 
 /// The symmetric positive definite square root `M^(1/2)`.
@@ -61,8 +62,7 @@ pub(crate) fn sym_inv_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error>
     sym_function(m, |l| T::one() / l.sqrt())
 }
 
-/// Symmetric part helper: nalgebra's `symmetrize_upper` is not available on
-/// references, so wrap it.
+/// The symmetric part `(A + A^T) / 2`.
 trait Symmetrize {
     fn symmetrize_upper(&self) -> Self;
 }

@@ -150,3 +150,18 @@ fn huge_values_work_in_f64() {
     let fit = calibrate::<f64, _>(&y, &Config::default()).unwrap();
     assert!(rel_err_m(&fit.calibration.shape(), &t) < 1e-9);
 }
+
+#[test]
+fn soft_iron_is_exactly_symmetric() {
+    let (t, b) = truth(3.0);
+    let mut y = samples(&t, &b, 300);
+    // a little deterministic "noise" so that nothing is exact by accident
+    for (i, v) in y.iter_mut().enumerate() {
+        v[i % 3] += 1e-3 * ((i * 7919 % 13) as f64 - 6.0);
+    }
+    let w = calibrate::<f64, _>(&y, &Config::default())
+        .unwrap()
+        .calibration
+        .soft_iron();
+    assert_eq!(w, w.transpose());
+}

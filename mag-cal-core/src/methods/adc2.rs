@@ -19,6 +19,7 @@
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
 use crate::artificial::Stats;
+use crate::linalg::sym_eigen;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
 use crate::{Error, Real};
 
@@ -96,6 +97,13 @@ pub fn solve<T: Real>(
     max_iter: u32,
 ) -> Result<Adc2Solution<T>, Error> {
     let objective = Adc2Objective::new(stats);
+    // The regressors [h_i, 1] must span four dimensions, else the minimiser
+    // is not unique (all h_i on one plane through the centre, or equal).
+    // Weak-but-regular geometry is judged by the quality checks, not here.
+    let eig = sym_eigen(objective.g)?;
+    if !(eig.eigenvalues.min() > eig.eigenvalues.amax() * T::EPSILON * T::lit(64.0)) {
+        return Err(Error::SingularSystem);
+    }
     // The gradient scales with 2n. Its rounding noise is about
     // eps * n * |Theta|, so 4 eps per unit is reachable, and it leaves a
     // parameter error of a few eps / lambda_min(G/n). A looser tolerance
@@ -116,4 +124,77 @@ pub fn solve<T: Real>(
         iterations: m.iterations,
         cost: m.cost,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix4;
+
+    /// Statistics of a made-up but consistent regression problem: 40
+    /// directions, residuals that are an exact affine function of `[h, 1]`
+    /// plus a wobble, accumulated by hand.
+    fn stats() -> Stats<f64> {
+        let mut s = Stats {
+            count: 0,
+            s_h: Vector3::zeros(),
+            s_hh: Matrix3::zeros(),
+            s_r: Vector3::zeros(),
+            s_rh: Matrix3::zeros(),
+            j0: 0.0,
+        };
+        for i in 0..40 {
+            let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / 40.0;
+            let (r, phi) = (libm::sqrt(1.0 - z * z), f64::from(i) * 2.4);
+            let h = Vector3::new(r * libm::cos(phi), r * libm::sin(phi), z);
+            let wobble = 0.01 * libm::sin(f64::from(i) * 1.7);
+            let res = Vector3::new(0.05 * h.x - 0.02, 0.03 * h.z + wobble, -0.04 * h.y + 0.01);
+            s.count += 1;
+            s.s_h += h;
+            s.s_hh += h * h.transpose();
+            s.s_r += res;
+            s.s_rh += res * h.transpose();
+            s.j0 += res.norm_squared();
+        }
+        s
+    }
+
+    #[test]
+    fn bfgs_reaches_the_closed_form_from_the_same_statistics() {
+        let st = stats();
+        let obj = Adc2Objective::new(&st);
+        // Closed form Theta = Q G^-1, by a 4x4 inverse.
+        let g_inv: Matrix4<f64> = obj.gram().try_inverse().unwrap();
+        let want = obj.q * g_inv;
+        let t0 = Matrix3::identity();
+        let sol = solve(&st, &t0, &Vector3::zeros(), 50).unwrap();
+        let got_t = sol.t - t0;
+        let err_t = (got_t - want.fixed_view::<3, 3>(0, 0)).amax();
+        let err_b = (sol.centre - want.column(3)).amax();
+        assert!(err_t < 1e-12 && err_b < 1e-12, "{err_t} {err_b}");
+        assert!(sol.iterations <= 6, "{} iterations", sol.iterations);
+        // The cost tracked by the exact line model equals a fresh evaluation.
+        let x = SVector::<f64, PARAMS>::from_column_slice(want.as_slice());
+        let (fresh, grad) = obj.cost_grad(&x);
+        assert!((sol.cost - fresh).abs() < 1e-12 * st.j0);
+        assert!(grad.amax() < 1e-12);
+        assert!(sol.cost < st.j0);
+    }
+
+    #[test]
+    fn degenerate_statistics_are_refused() {
+        // All directions equal: G is singular, the curvature along some
+        // direction is zero. An error, not a panic or a NaN result.
+        let h = Vector3::new(0.0, 0.0, 1.0);
+        let st = Stats {
+            count: 20,
+            s_h: h * 20.0,
+            s_hh: h * h.transpose() * 20.0,
+            s_r: Vector3::new(0.1, 0.0, 0.0),
+            s_rh: Matrix3::zeros(),
+            j0: 1.0,
+        };
+        let r = solve(&st, &Matrix3::identity(), &Vector3::zeros(), 50);
+        assert_eq!(r.unwrap_err(), Error::SingularSystem);
+    }
 }
