@@ -17,7 +17,7 @@ pub enum LsVariant {
     #[default]
     Ls9,
     /// Coefficients = eigenvector of the smallest eigenvalue of the 10x10
-    /// scatter (closest to the paper's reference [4]). Its normalisation
+    /// scatter (closest to the paper's reference \[4\]). Its normalisation
     /// `|v| = 1` counts each off-diagonal coefficient of the quadric once,
     /// so unlike the other variants it is not rotation-equivariant: on noisy
     /// data the fit depends slightly on the sensor frame.
