@@ -3,3 +3,4 @@
 pub mod real;
 pub mod reference;
 pub mod sim;
+pub mod target_vectors;
