@@ -1,0 +1,156 @@
+//! Project automation, run as `cargo xtask <command>` (alias in
+//! `.cargo/config.toml`).
+//!
+//! | command | what |
+//! |---|---|
+//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
+//! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
+//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, and the QEMU run |
+//!
+//! Each step prints what it runs; the first failing step ends the run with
+//! its exit status.
+
+use std::path::{Path, PathBuf};
+use std::process::{exit, Command};
+
+/// `defmt-print` version installed when missing (matches the `defmt` 1.0
+/// wire format the firmware emits).
+const DEFMT_PRINT_VERSION: &str = "1.2.0";
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("setup") => setup(),
+        Some("qemu") => setup().and_then(|()| qemu_demo()),
+        Some("test") => setup().and_then(|()| test_all()),
+        _ => {
+            eprintln!("usage: cargo xtask <setup|qemu|test>");
+            exit(2);
+        }
+    };
+    if let Err(e) = result {
+        eprintln!("xtask: {e}");
+        exit(1);
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask lives in the workspace")
+        .to_path_buf()
+}
+
+fn firmware_dir() -> PathBuf {
+    root().join("firmware-example")
+}
+
+/// Runs a command in `dir`, failing with its description on a non-zero exit.
+fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
+    println!("\n==> ({}) {program} {}", dir.display(), args.join(" "));
+    let status = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        // The firmware is a workspace of its own: do not leak this cargo's
+        // per-invocation settings into it.
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("CARGO_BUILD_TARGET")
+        .status()
+        .map_err(|e| format!("cannot start {program}: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`{program} {}` failed ({status})", args.join(" ")))
+    }
+}
+
+fn on_path(program: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {program} >/dev/null 2>&1")])
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| o.stdout.trim_ascii() == b"0")
+}
+
+/// Installs what is missing; idempotent and quiet when nothing is.
+fn setup() -> Result<(), String> {
+    let root = root();
+    // Reads rust-toolchain.toml: the pinned channel, the thumb target,
+    // clippy and rustfmt.
+    run(&root, "rustup", &["toolchain", "install"])?;
+    if !on_path("qemu-system-arm") {
+        if !on_path("apt-get") {
+            return Err("qemu-system-arm is missing and apt-get is not available: install QEMU's ARM system emulator".into());
+        }
+        let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
+        let apt = |args: &[&str]| {
+            let mut full: Vec<&str> = sudo.to_vec();
+            full.push("apt-get");
+            full.extend_from_slice(args);
+            run(&root, full[0], &full[1..])
+        };
+        apt(&["update", "-qq"])?;
+        apt(&["install", "-y", "-qq", "qemu-system-arm"])?;
+    }
+    if !on_path("defmt-print") {
+        run(
+            &root,
+            "cargo",
+            &[
+                "install",
+                "defmt-print",
+                "--locked",
+                "--version",
+                DEFMT_PRINT_VERSION,
+            ],
+        )?;
+    }
+    Ok(())
+}
+
+/// The main job: the firmware on the emulated board, against the simulated
+/// sensor; exits non-zero when the calibration misses its bounds.
+fn qemu_demo() -> Result<(), String> {
+    run(
+        &firmware_dir(),
+        "cargo",
+        &[
+            "run",
+            "--release",
+            "--locked",
+            "--no-default-features",
+            "--features",
+            "qemu",
+            "--bin",
+            "firmware-example",
+        ],
+    )
+}
+
+/// Every test: host, on-target under QEMU, the board build, the QEMU demo.
+fn test_all() -> Result<(), String> {
+    run(&root(), "cargo", &["test", "--workspace", "--locked"])?;
+    let fw = firmware_dir();
+    run(
+        &fw,
+        "cargo",
+        &[
+            "run",
+            "--release",
+            "--locked",
+            "--no-default-features",
+            "--features",
+            "qemu",
+            "--bin",
+            "ontarget",
+        ],
+    )?;
+    run(&fw, "cargo", &["build", "--release", "--locked"])?;
+    qemu_demo()
+}
