@@ -1,0 +1,335 @@
+//! The physics of a simulated, distorted three-axis magnetometer.
+//!
+//! Pure `no_std` + `libm` with no embedded dependency, so that host tests can
+//! reuse it as is. [`crate::sim_sensor`] wraps it in a register-level
+//! LSM303AGR for the QEMU build.
+//!
+//! # Model
+//!
+//! A reading, in sensor counts (1 count = 1.5 mG = 150 nT), is
+//!
+//! ```text
+//! y = round(F T h + b + e),   e ~ N(0, sigma^2 I)
+//! ```
+//!
+//! - `h`: unit direction of the Earth's field in the sensor (body) frame,
+//!   given by the motion (below);
+//! - `F`: field strength in counts (48 uT = 320 counts);
+//! - `T`: soft-iron matrix, dimensionless, `V diag(0.8, 1.0, 1.25) V^T` with
+//!   `V` a rotation, so the distortion is not aligned with the sensor axes and
+//!   `det T = 1` (so the true `rho = |det F T|^(1/3) = F`);
+//! - `b`: hard-iron offset, counts;
+//! - `e`: per-axis Gaussian noise (SplitMix64 + Box-Muller), then rounding
+//!   to `i16` counts.
+//!
+//! `T` is symmetric positive definite on purpose. A calibration only
+//! determines `M = W^T W` (any rotation of the calibrated frame fits equally
+//! well) and the core returns `W` in the canonical symmetric form
+//! `M^(1/2)`. For a symmetric positive definite `T`, `W_true = (F T)^-1` is
+//! already canonical, so the calibrated frame *is* the sensor frame and the
+//! calibrated heading can be compared with the true heading directly. A
+//! non-symmetric `T = Q P` (polar form) would rotate the calibrated frame by
+//! `Q`, which only an alignment step (planned in the core) can undo.
+//!
+//! # Motion
+//!
+//! The frame convention is NED: Earth field `F (cos dip, 0, sin dip)`
+//! (north, east, down); body axes x forward, y right, z down.
+//!
+//! - [`Motion::Sweep`]: the sensor is tumbled so that `h` follows a
+//!   spherical spiral from `+z` to `-z` (Saff and Kuijlaars' generalised
+//!   spiral) over `sweep_samples` samples, consecutive samples about 8 deg
+//!   apart; then back up, and so on. It covers the sphere evenly, which is
+//!   what a careful user turning the device in all directions achieves. Only
+//!   the body-frame direction of the field is observable by a magnetometer,
+//!   so the motion is specified by it.
+//! - [`Motion::LevelTurn`]: a compass swing. The sensor is level and stops at
+//!   `stops` headings `psi_j = offset + j 360 / stops` for `dwell` samples
+//!   each; then `h = (cos dip cos psi, -cos dip sin psi, sin dip)` and the
+//!   level heading is `atan2(-h_y, h_x) = psi`.
+
+use core::f64::consts::PI;
+
+/// Magnetometer sensitivity of the LSM303AGR: nanotesla per count.
+pub const NT_PER_COUNT: f64 = 150.0;
+
+/// The fixed parameters of a simulation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scenario {
+    /// Earth field strength, nT.
+    pub field_nt: f64,
+    /// Inclination (dip) of the field below the horizon, degrees.
+    pub dip_deg: f64,
+    /// Singular values of the soft-iron matrix `T` (dimensionless).
+    pub soft_iron_singular_values: [f64; 3],
+    /// Rotation of `T`'s principal axes: Euler angles z-y-x, degrees.
+    pub soft_iron_axes_deg: [f64; 3],
+    /// Hard-iron offset, counts.
+    pub hard_iron: [f64; 3],
+    /// Standard deviation of the per-axis noise, counts.
+    pub noise: f64,
+    /// Samples of one pole-to-pole pass of the sweep.
+    pub sweep_samples: u32,
+    /// PRNG seed.
+    pub seed: u64,
+}
+
+impl Scenario {
+    /// The scenario of the firmware example: a mid-latitude field (48 uT,
+    /// dip 60 deg), a tilted soft iron of +-25 %, a hard iron of a few hundred
+    /// counts, and 2.5 counts of noise (the LSM303AGR's datasheet RMS noise
+    /// is about 1.5-3 mG, i.e. 1-2 counts, so this is on the pessimistic
+    /// side).
+    pub const DEFAULT: Scenario = Scenario {
+        field_nt: 48_000.0,
+        dip_deg: 60.0,
+        soft_iron_singular_values: [0.8, 1.0, 1.25],
+        soft_iron_axes_deg: [35.0, -20.0, 50.0],
+        hard_iron: [180.0, -95.0, 240.0],
+        noise: 2.5,
+        sweep_samples: 600,
+        seed: 0x6d61_672d_6361_6c21,
+    };
+}
+
+/// What the simulated sensor is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Motion {
+    /// Tumbling: the field direction follows a spiral over the sphere.
+    Sweep,
+    /// Level, stopping at `stops` evenly spaced headings for `dwell` samples.
+    LevelTurn {
+        /// Number of headings in a full turn.
+        stops: u32,
+        /// Samples at each heading.
+        dwell: u32,
+        /// Heading of the first stop, degrees.
+        offset_deg: u32,
+    },
+}
+
+/// One simulated sample and its truth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reading {
+    /// The quantised reading, counts.
+    pub counts: [i16; 3],
+    /// The true unit field direction in the sensor frame.
+    pub direction: [f64; 3],
+    /// The true level heading `atan2(-h_y, h_x)` in degrees, `[0, 360)`
+    /// (meaningful during [`Motion::LevelTurn`]).
+    pub heading_deg: f64,
+}
+
+/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, seedable, well-mixed PRNG.
+#[derive(Clone, Debug)]
+pub struct SplitMix64(u64);
+
+impl SplitMix64 {
+    /// A generator with the given seed.
+    pub const fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `(0, 1]` (never 0, so its logarithm is finite).
+    pub fn uniform(&mut self) -> f64 {
+        ((self.next_u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+}
+
+/// Standard normal deviates by the Box-Muller transform.
+#[derive(Clone, Debug)]
+pub struct Gaussian {
+    rng: SplitMix64,
+    spare: Option<f64>,
+}
+
+impl Gaussian {
+    /// A generator with the given seed.
+    pub const fn new(seed: u64) -> Self {
+        Self {
+            rng: SplitMix64::new(seed),
+            spare: None,
+        }
+    }
+
+    /// The next `N(0, 1)` deviate.
+    pub fn sample(&mut self) -> f64 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
+        let r = libm::sqrt(-2.0 * libm::log(self.rng.uniform()));
+        let phi = 2.0 * PI * self.rng.uniform();
+        self.spare = Some(r * libm::sin(phi));
+        r * libm::cos(phi)
+    }
+}
+
+type Mat3 = [[f64; 3]; 3];
+
+fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
+    let mut c = [[0.0; 3]; 3];
+    for (i, row) in c.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    c
+}
+
+fn mat_vec(a: &Mat3, v: &[f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| a[i][0] * v[0] + a[i][1] * v[1] + a[i][2] * v[2])
+}
+
+/// Rotation `R_z(yaw) R_y(pitch) R_x(roll)`, angles in degrees.
+fn rotation_zyx(deg: [f64; 3]) -> Mat3 {
+    let [(sz, cz), (sy, cy), (sx, cx)] = deg.map(|d| libm::sincos(d.to_radians()));
+    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+    mat_mul(&rz, &mat_mul(&ry, &rx))
+}
+
+/// The simulated magnetometer: truth, motion and noise.
+#[derive(Clone, Debug)]
+pub struct Simulator {
+    scenario: Scenario,
+    /// `F T`, counts.
+    soft_iron: Mat3,
+    noise: Gaussian,
+    motion: Motion,
+    /// Samples since the motion was set.
+    step: u32,
+    /// Longitude of the sweep spiral, radians.
+    spiral_phi: f64,
+}
+
+impl Simulator {
+    /// A simulator of `scenario`, starting with [`Motion::Sweep`].
+    pub fn new(scenario: Scenario) -> Self {
+        let v = rotation_zyx(scenario.soft_iron_axes_deg);
+        let f = scenario.field_nt / NT_PER_COUNT;
+        let s = scenario.soft_iron_singular_values;
+        // F V diag(s) V^T
+        let mut t = [[0.0; 3]; 3];
+        for (i, row) in t.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = f * (0..3).map(|k| v[i][k] * s[k] * v[j][k]).sum::<f64>();
+            }
+        }
+        Self {
+            scenario,
+            soft_iron: t,
+            noise: Gaussian::new(scenario.seed),
+            motion: Motion::Sweep,
+            step: 0,
+            spiral_phi: 0.0,
+        }
+    }
+
+    /// The scenario.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The true soft-iron matrix `F T` in counts (symmetric positive
+    /// definite): `y = F T h + b`. Its inverse is the true canonical `W`.
+    pub fn soft_iron(&self) -> Mat3 {
+        self.soft_iron
+    }
+
+    /// The true hard-iron offset `b`, counts.
+    pub fn hard_iron(&self) -> [f64; 3] {
+        self.scenario.hard_iron
+    }
+
+    /// The true field strength `rho = |det(F T)|^(1/3)`, counts.
+    pub fn field_strength(&self) -> f64 {
+        let t = &self.soft_iron;
+        let det = t[0][0] * (t[1][1] * t[2][2] - t[1][2] * t[2][1])
+            - t[0][1] * (t[1][0] * t[2][2] - t[1][2] * t[2][0])
+            + t[0][2] * (t[1][0] * t[2][1] - t[1][1] * t[2][0]);
+        libm::cbrt(libm::fabs(det))
+    }
+
+    /// Changes the motion; its schedule restarts.
+    pub fn set_motion(&mut self, motion: Motion) {
+        self.motion = motion;
+        self.step = 0;
+        self.spiral_phi = 0.0;
+    }
+
+    /// The true field direction and heading (degrees) of the next sample.
+    fn next_direction(&mut self) -> ([f64; 3], f64) {
+        let step = self.step;
+        self.step = self.step.wrapping_add(1);
+        match self.motion {
+            Motion::Sweep => {
+                let n = self.scenario.sweep_samples.max(2);
+                let k = step % n;
+                // Odd passes run back up, so the path stays continuous.
+                let down = (step / n).is_multiple_of(2);
+                let z = 1.0 - (2.0 * f64::from(k) + 1.0) / f64::from(n);
+                let z = if down { z } else { -z };
+                let r = libm::sqrt(1.0 - z * z);
+                // Generalised spiral: longitude step 3.6 / sqrt(n) / r gives an
+                // even spacing of about 3.6 / sqrt(n) rad along and across.
+                self.spiral_phi =
+                    (self.spiral_phi + 3.6 / libm::sqrt(f64::from(n)) / r) % (2.0 * PI);
+                let (s, c) = libm::sincos(self.spiral_phi);
+                let h = [r * c, r * s, z];
+                (h, heading_deg(&h))
+            }
+            Motion::LevelTurn {
+                stops,
+                dwell,
+                offset_deg,
+            } => {
+                let stop = (step / dwell.max(1)) % stops.max(1);
+                let psi = (f64::from(offset_deg)
+                    + f64::from(stop) * 360.0 / f64::from(stops.max(1)))
+                    % 360.0;
+                let (sd, cd) = libm::sincos(self.scenario.dip_deg.to_radians());
+                let (sp, cp) = libm::sincos(psi.to_radians());
+                ([cd * cp, -cd * sp, sd], psi)
+            }
+        }
+    }
+
+    /// The next sample.
+    pub fn next_reading(&mut self) -> Reading {
+        let (h, heading_deg) = self.next_direction();
+        let th = mat_vec(&self.soft_iron, &h);
+        let b = self.scenario.hard_iron;
+        let mut counts = [0i16; 3];
+        for (i, c) in counts.iter_mut().enumerate() {
+            let y = th[i] + b[i] + self.scenario.noise * self.noise.sample();
+            // `as` saturates: the sensor's output clips at the i16 range.
+            *c = libm::round(y) as i16;
+        }
+        Reading {
+            counts,
+            direction: h,
+            heading_deg,
+        }
+    }
+}
+
+/// Level heading of a field direction in the NED body frame, degrees in
+/// `[0, 360)`: `atan2(-h_y, h_x)`.
+pub fn heading_deg(h: &[f64; 3]) -> f64 {
+    let d = libm::atan2(-h[1], h[0]).to_degrees();
+    if d < 0.0 {
+        d + 360.0
+    } else {
+        d
+    }
+}
