@@ -25,55 +25,73 @@ pub struct Case {
     pub fit: reference::RefFit,
 }
 
+/// How one case is simulated.
+struct Spec {
+    name: &'static str,
+    /// Field strength, counts.
+    radius: f64,
+    hard_iron: [f64; 3],
+    /// Directions on a +-30 deg band instead of the whole sphere.
+    banded: bool,
+    noise: [f64; 3],
+    seed: u64,
+}
+
+const SPECS: [Spec; 3] = [
+    Spec {
+        name: "sphere",
+        radius: 400.0,
+        hard_iron: [-150.0, 60.0, 220.0],
+        banded: false,
+        noise: [4.0, 6.0, 8.0],
+        seed: 101,
+    },
+    Spec {
+        name: "band30",
+        radius: 400.0,
+        hard_iron: [80.0, -40.0, 10.0],
+        banded: true,
+        noise: [2.0, 3.0, 4.0],
+        seed: 102,
+    },
+    Spec {
+        name: "offset25000",
+        radius: 2000.0,
+        hard_iron: [25000.0, -24000.0, 26000.0],
+        banded: false,
+        noise: [20.0, 30.0, 40.0],
+        seed: 103,
+    },
+];
+
 /// The cases: full sphere, a +-30 deg band, and a large offset, each scaled
 /// to realistic magnetometer counts and rounded to `i16`.
 pub fn cases() -> Vec<Case> {
-    let specs: [(&'static str, f64, [f64; 3], bool, [f64; 3], u64); 3] = [
-        (
-            "sphere",
-            400.0,
-            [-150.0, 60.0, 220.0],
-            false,
-            [4.0, 6.0, 8.0],
-            101,
-        ),
-        (
-            "band30",
-            400.0,
-            [80.0, -40.0, 10.0],
-            true,
-            [2.0, 3.0, 4.0],
-            102,
-        ),
-        (
-            "offset25000",
-            2000.0,
-            [25000.0, -24000.0, 26000.0],
-            false,
-            [20.0, 30.0, 40.0],
-            103,
-        ),
-    ];
-    specs
-        .into_iter()
-        .map(|(name, radius, b, banded, noise, seed)| {
-            let mut rng = Rng(seed);
-            let dirs = if banded {
+    SPECS
+        .iter()
+        .map(|spec| {
+            let mut rng = Rng(spec.seed);
+            let dirs = if spec.banded {
                 band(300, 30.0, &mut rng)
             } else {
                 sphere(300, &mut rng)
             };
+            let t = scenario_t() * spec.radius;
             let raw = make_samples_axes(
-                &(scenario_t() * radius),
-                &Vector3::from(b),
+                &t,
+                &Vector3::from(spec.hard_iron),
                 &dirs,
-                noise,
+                spec.noise,
                 &mut rng,
             );
             let samples: Vec<[i16; 3]> = raw.iter().map(|v| v.map(|c| c.round() as i16)).collect();
             let exact: Vec<[f64; 3]> = samples.iter().map(|v| v.map(f64::from)).collect();
             let fit = reference::adc2(&exact, RefLs::Ls9).expect("reference fit of a test vector");
-            Case { name, samples, fit }
+            Case {
+                name: spec.name,
+                samples,
+                fit,
+            }
         })
         .collect()
 }
