@@ -88,9 +88,15 @@ fn setup() -> Result<(), String> {
         if !on_path("apt-get") {
             return Err("qemu-system-arm is missing and apt-get is not available: install QEMU's ARM system emulator".into());
         }
-        let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
+        // No prompts: CI has no standard input. `sudo` drops the
+        // environment, so the frontend is passed as its argument.
+        let prefix: &[&str] = if is_root() {
+            &["env", "DEBIAN_FRONTEND=noninteractive"]
+        } else {
+            &["sudo", "DEBIAN_FRONTEND=noninteractive"]
+        };
         let apt = |args: &[&str]| {
-            let mut full: Vec<&str> = sudo.to_vec();
+            let mut full: Vec<&str> = prefix.to_vec();
             full.push("apt-get");
             full.extend_from_slice(args);
             run(&root, full[0], &full[1..])
