@@ -14,12 +14,14 @@
 //! terms and nothing cancels, even in `f32`:
 //!
 //! ```text
-//! n,  s_h = sum h_i,  S_hh = sum h_i h_i^T,  s_r = sum r_i,  S_rh = sum r_i h_i^T,  J0 = sum |r_i|^2
+//! n,  s_h = sum h_i,  S_hh = sum h_i h_i^T,  s_r = sum r_i,  S_rh = sum r_i h_i^T,  S_rr = sum r_i r_i^T
 //! ```
 //!
-//! (The design document's `s_d`, `S_dh` are `s_r + T0 s_h` and `S_rh + T0 S_hh`.)
+//! The ADC2 cost at the start is `J0 = tr S_rr`; ADC1 weights the same
+//! quantities. (The design document's `s_d`, `S_dh` are `s_r + T0 s_h` and
+//! `S_rh + T0 S_hh`.)
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
 use crate::moments::BLOCK;
 use crate::normalize::Normalization;
@@ -39,11 +41,38 @@ pub struct Stats<T: Real> {
     pub s_r: Vector3<T>,
     /// `sum r_i h_i^T`.
     pub s_rh: Matrix3<T>,
-    /// `sum |r_i|^2`: the ADC2 cost at the start.
-    pub j0: T,
+    /// `sum r_i r_i^T` (symmetric); its trace is the ADC2 cost at the start.
+    pub s_rr: Matrix3<T>,
 }
 
 impl<T: Real> Stats<T> {
+    /// `Q = [S_rh | s_r]` (3x4): residuals against the regressors `[h, 1]`.
+    pub fn q(&self) -> Matrix3x4<T> {
+        let mut q = Matrix3x4::zeros();
+        q.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.s_rh);
+        q.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.s_r);
+        q
+    }
+
+    /// `G = [[S_hh, s_h], [s_h^T, n]]` (4x4): the Gram matrix of `[h, 1]`.
+    pub fn gram(&self) -> Matrix4<T> {
+        let mut g = Matrix4::zeros();
+        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.s_hh);
+        g.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.s_h);
+        g.fixed_view_mut::<1, 3>(3, 0)
+            .copy_from(&self.s_h.transpose());
+        g[(3, 3)] = T::from_count(self.count);
+        g
+    }
+
+    /// Covariance of the start residuals, `S_rr/n - (s_r/n)(s_r/n)^T`: the
+    /// paper's noise estimate for ADC1 (normalised units).
+    pub fn residual_covariance(&self) -> Matrix3<T> {
+        let n = T::from_count(self.count);
+        let mean = self.s_r / n;
+        self.s_rr / n - mean * mean.transpose()
+    }
+
     /// One pass over the samples with the start `(centre, w)` = (`b0`, `W0`)
     /// in the coordinates of `norm`.
     pub fn accumulate<S: Sample>(
@@ -73,7 +102,7 @@ impl<T: Real> Stats<T> {
                 acc.s_hh += h * h.transpose();
                 acc.s_r += r;
                 acc.s_rh += r * h.transpose();
-                acc.j0 += r.norm_squared();
+                acc.s_rr += r * r.transpose();
                 count += 1;
             }
             total.add(&acc);
@@ -90,7 +119,7 @@ impl<T: Real> Stats<T> {
             s_hh: total.s_hh,
             s_r: total.s_r,
             s_rh: total.s_rh,
-            j0: total.j0,
+            s_rr: total.s_rr,
         })
     }
 }
@@ -100,7 +129,7 @@ struct Acc<T: Real> {
     s_hh: Matrix3<T>,
     s_r: Vector3<T>,
     s_rh: Matrix3<T>,
-    j0: T,
+    s_rr: Matrix3<T>,
 }
 
 impl<T: Real> Acc<T> {
@@ -110,7 +139,7 @@ impl<T: Real> Acc<T> {
             s_hh: Matrix3::zeros(),
             s_r: Vector3::zeros(),
             s_rh: Matrix3::zeros(),
-            j0: T::zero(),
+            s_rr: Matrix3::zeros(),
         }
     }
 
@@ -119,6 +148,6 @@ impl<T: Real> Acc<T> {
         self.s_hh += o.s_hh;
         self.s_r += o.s_r;
         self.s_rh += o.s_rh;
-        self.j0 += o.j0;
+        self.s_rr += o.s_rr;
     }
 }

@@ -37,6 +37,12 @@ pub enum Error {
     },
     /// A fixed-capacity sample store is full.
     CapacityExceeded,
+    /// Two inputs that must pair up element by element have different
+    /// lengths (e.g. calibrated and reference vectors for alignment).
+    MismatchedLengths,
+    /// A given noise covariance is not finite, symmetric and positive
+    /// definite.
+    InvalidNoiseCovariance,
 }
 
 impl fmt::Display for Error {
@@ -60,6 +66,10 @@ impl fmt::Display for Error {
                 write!(f, "solver did not converge within {iterations} iterations")
             }
             Error::CapacityExceeded => f.write_str("sample store is full"),
+            Error::MismatchedLengths => f.write_str("paired inputs have different lengths"),
+            Error::InvalidNoiseCovariance => {
+                f.write_str("noise covariance is not finite, symmetric and positive definite")
+            }
         }
     }
 }

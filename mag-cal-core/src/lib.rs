@@ -50,10 +50,13 @@
 //! # Features
 //! - `defmt`: derive `defmt::Format` for [`Error`], [`Method`], [`LsVariant`].
 //!
+//! Beyond ADC2, [`Method`] offers the paper's ADC1 (whose minimiser equals
+//! ADC2's, see [`methods::adc1`]) and subMLE baseline, and iterated ADC2,
+//! which reaches subMLE's accuracy at a fraction of its cost.
+//!
 //! # Not supported (yet)
-//! ADC1, iterated ADC2, subMLE, alignment, heading and the degenerate-geometry
-//! checks beyond positive definiteness are planned; so are streaming
-//! collection with coverage and persistence.
+//! The degenerate-geometry checks beyond positive definiteness, streaming
+//! collection with coverage, and persistence are planned.
 
 #![no_std]
 #![forbid(unsafe_code)]
@@ -62,15 +65,17 @@
 // NaN, so a NaN never passes a validity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod align;
 pub mod artificial;
 pub mod calibration;
 pub mod ellipsoid;
 mod error;
+pub mod heading;
 mod linalg;
 pub mod methods;
 pub mod moments;
 pub mod normalize;
-mod quality;
+pub mod quality;
 pub mod quasi_newton;
 mod real;
 mod sample;
@@ -86,20 +91,34 @@ pub use error::Error;
 pub use methods::Method;
 pub use nalgebra;
 pub use normalize::MIN_SAMPLES;
+pub use quality::{Warning, Warnings};
 pub use real::Real;
 pub use sample::{Sample, SampleStore};
 
 /// What to run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
     /// The method (default [`Method::Adc2`]).
     pub method: Method,
     /// The LS variant of step 1 (default [`LsVariant::Ls9`]).
     pub ls: LsVariant,
-    /// Iteration cap of the quasi-Newton solver (default 50). ADC2 takes
+    /// Iteration cap of each quasi-Newton solve (default 50). ADC2 takes
     /// 2-4: with the exact line search on its quadratic cost, whose Hessian
     /// has four distinct eigenvalues, BFGS ends in at most four steps.
+    /// subMLE takes 10-20.
     pub max_iterations: u32,
+    /// Cap on the data passes of [`Method::Adc2Iterated`] (default 50;
+    /// it needs 5-12, more on partial coverage). Hitting it is reported as
+    /// [`Warning::PassCap`].
+    pub max_passes: u32,
+    /// Stop tolerance of [`Method::Adc2Iterated`] on the gauge-free change
+    /// of a pass, `max|dM| rho^2 + max|db| / rho`; `None` is `1e-6` in
+    /// `f64` and `1e-5` in `f32`.
+    pub pass_tolerance: Option<f64>,
+    /// Per-sample noise covariance `Sigma`, sensor units squared, for
+    /// [`Method::Adc1`]; when `None`, it is estimated from the LS residuals
+    /// (the paper's procedure).
+    pub noise_covariance: Option<[[f64; 3]; 3]>,
 }
 
 impl Default for Config {
@@ -108,6 +127,9 @@ impl Default for Config {
             method: Method::Adc2,
             ls: LsVariant::Ls9,
             max_iterations: 50,
+            max_passes: 50,
+            pass_tolerance: None,
+            noise_covariance: None,
         }
     }
 }
@@ -119,14 +141,20 @@ pub struct Report<T: Real> {
     pub method: Method,
     /// The LS variant of step 1.
     pub ls: LsVariant,
-    /// Quasi-Newton iterations (0 for [`Method::Ls`]).
+    /// Quasi-Newton iterations, summed over all solves (0 for [`Method::Ls`]).
     pub iterations: u32,
+    /// Passes over the samples after the LS fit: 1 for ADC1 and ADC2, one
+    /// per fixed-point step for iterated ADC2, one per cost evaluation for
+    /// subMLE (0 for [`Method::Ls`]).
+    pub passes: u32,
     /// Finite samples used.
     pub samples_used: usize,
     /// Non-finite samples skipped.
     pub samples_dropped: usize,
     /// RMS of `|W (y - b)| - 1` over the samples used.
     pub radial_rms: T,
+    /// What the caller should know but that did not refuse the fit.
+    pub warnings: Warnings,
 }
 
 /// A calibration and its report.
@@ -148,15 +176,14 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
     let norm = scan.norm;
     let moments = moments::Moments::accumulate(samples, &norm);
     let ls = ellipsoid::fit(&moments, config.ls)?;
-    let (centre, w, iterations) = match config.method {
-        Method::Ls => (ls.centre, ls.w, 0),
-        Method::Adc2 => {
-            let stats = artificial::Stats::accumulate(samples, &norm, &ls.centre, &ls.w)?;
-            let sol = methods::adc2::solve(&stats, &ls.t, &ls.centre, config.max_iterations)?;
-            let w = linalg::sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
-            (sol.centre, w, sol.iterations)
-        }
+    let est = match config.method {
+        Method::Ls => methods::Estimate::from_ellipsoid(&ls),
+        Method::Adc1 => methods::adc1::run(samples, &norm, &ls, config)?,
+        Method::Adc2 => methods::adc2::run(samples, &norm, &ls, config)?,
+        Method::Adc2Iterated => methods::iterated::run(samples, &norm, &ls, config)?,
+        Method::SubMle => methods::submle::run(samples, &norm, &ls, config)?,
     };
+    let (centre, w) = (est.centre, est.w);
     let calibration = Calibration::from_normalised_w(&norm, &w, &centre)?;
     let radial_rms = quality::radial_rms(samples, &norm, &centre, &w);
     Ok(Fit {
@@ -164,10 +191,12 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
         report: Report {
             method: config.method,
             ls: config.ls,
-            iterations,
+            iterations: est.iterations,
+            passes: est.passes,
             samples_used: scan.used,
             samples_dropped: scan.dropped,
             radial_rms,
+            warnings: est.warnings,
         },
     })
 }

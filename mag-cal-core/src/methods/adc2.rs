@@ -19,9 +19,13 @@
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
 use crate::artificial::Stats;
-use crate::linalg::sym_eigen;
+use crate::ellipsoid::Ellipsoid;
+use crate::linalg::{sym_eigen, sym_inv_sqrt};
+use crate::methods::Estimate;
+use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
-use crate::{Error, Real};
+use crate::sample::Sample;
+use crate::{Config, Error, Real, Warnings};
 
 /// Number of parameters: `dT` (9) and `beta` (3).
 pub const PARAMS: usize = 12;
@@ -35,27 +39,18 @@ pub struct Adc2Objective<T: Real> {
 }
 
 impl<T: Real> Adc2Objective<T> {
-    /// Builds `Q` and `G` from the statistics.
+    /// Builds `J0`, `Q` and `G` from the statistics.
     pub fn new(stats: &Stats<T>) -> Self {
-        let mut q = Matrix3x4::zeros();
-        q.fixed_view_mut::<3, 3>(0, 0).copy_from(&stats.s_rh);
-        q.fixed_view_mut::<3, 1>(0, 3).copy_from(&stats.s_r);
-        let mut g = Matrix4::zeros();
-        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&stats.s_hh);
-        g.fixed_view_mut::<3, 1>(0, 3).copy_from(&stats.s_h);
-        g.fixed_view_mut::<1, 3>(3, 0)
-            .copy_from(&stats.s_h.transpose());
-        g[(3, 3)] = T::from_count(stats.count);
-        Self { j0: stats.j0, q, g }
-    }
-
-    /// The 4x4 Gram matrix `G` of the regressors `[h_i, 1]`.
-    pub fn gram(&self) -> &Matrix4<T> {
-        &self.g
+        Self {
+            j0: stats.s_rr.trace(),
+            q: stats.q(),
+            g: stats.gram(),
+        }
     }
 }
 
-fn theta<T: Real>(x: &SVector<T, PARAMS>) -> Matrix3x4<T> {
+/// The 3x4 matrix `Theta` held column-major in a parameter vector.
+pub(crate) fn theta<T: Real>(x: &SVector<T, PARAMS>) -> Matrix3x4<T> {
     Matrix3x4::from_column_slice(x.as_slice())
 }
 
@@ -88,6 +83,32 @@ pub struct Adc2Solution<T: Real> {
     pub cost: T,
 }
 
+/// The regressors `[h_i, 1]` must span four dimensions, else the minimiser
+/// is not unique (all `h_i` on one plane through the centre, or equal).
+/// Weak-but-regular geometry is judged by the quality checks, not here.
+pub(crate) fn check_gram<T: Real>(g: &Matrix4<T>) -> Result<(), Error> {
+    let eig = sym_eigen(*g)?;
+    if eig.eigenvalues.min() > eig.eigenvalues.amax() * T::EPSILON * T::lit(64.0) {
+        Ok(())
+    } else {
+        Err(Error::SingularSystem)
+    }
+}
+
+/// BFGS options shared by ADC1 and ADC2. The gradient scales with `2n`
+/// (for ADC1, with `2n` times the largest weight). Its rounding noise is
+/// about `eps * n * |Theta|`, so `4 eps` per unit is reachable, and it leaves
+/// a parameter error of a few `eps / lambda_min(G/n)`. A looser tolerance
+/// (`eps^(3/4)` was tried) stops f32 early: 3e-5 off f64 instead of 4e-6.
+/// When the gradient test is out of reach, the step test ends the solve.
+pub(crate) fn options<T: Real>(count: usize, weight_scale: T, max_iter: u32) -> BfgsOptions<T> {
+    BfgsOptions {
+        step_tol: T::lit(1e-6),
+        grad_tol: T::lit(8.0) * T::from_count(count) * weight_scale * T::EPSILON,
+        max_iter,
+    }
+}
+
 /// Runs ADC2 from the start `(t0, centre0)` whose artificial-data
 /// statistics are `stats`.
 pub fn solve<T: Real>(
@@ -97,25 +118,8 @@ pub fn solve<T: Real>(
     max_iter: u32,
 ) -> Result<Adc2Solution<T>, Error> {
     let objective = Adc2Objective::new(stats);
-    // The regressors [h_i, 1] must span four dimensions, else the minimiser
-    // is not unique (all h_i on one plane through the centre, or equal).
-    // Weak-but-regular geometry is judged by the quality checks, not here.
-    let eig = sym_eigen(objective.g)?;
-    if !(eig.eigenvalues.min() > eig.eigenvalues.amax() * T::EPSILON * T::lit(64.0)) {
-        return Err(Error::SingularSystem);
-    }
-    // The gradient scales with 2n. Its rounding noise is about
-    // eps * n * |Theta|, so 4 eps per unit is reachable, and it leaves a
-    // parameter error of a few eps / lambda_min(G/n). A looser tolerance
-    // (eps^(3/4) was tried) stops f32 early: 3e-5 off f64 instead of 4e-6.
-    // When the gradient test is out of reach, the step test ends the solve.
-    let n = T::from_count(stats.count);
-    let tau = T::EPSILON * T::lit(4.0);
-    let opts = BfgsOptions {
-        step_tol: T::lit(1e-6),
-        grad_tol: T::lit(2.0) * n * tau,
-        max_iter,
-    };
+    check_gram(&objective.g)?;
+    let opts = options(stats.count, T::one(), max_iter);
     let m = bfgs(&objective, SVector::zeros(), &opts)?;
     let th = theta(&m.x);
     Ok(Adc2Solution {
@@ -126,10 +130,52 @@ pub fn solve<T: Real>(
     })
 }
 
+/// The ADC2 minimiser in closed form, `Theta = Q G^-1` (a 4x4 Cholesky
+/// solve), from the start `(t0, centre0)`. Exact where BFGS stops at the
+/// paper's step test; iterated ADC2 needs that, since its corrections near
+/// the fixed point are themselves of the order of that tolerance.
+pub fn solve_closed_form<T: Real>(
+    stats: &Stats<T>,
+    t0: &Matrix3<T>,
+    centre0: &Vector3<T>,
+) -> Result<Adc2Solution<T>, Error> {
+    let g = stats.gram();
+    check_gram(&g)?;
+    let chol = nalgebra::Cholesky::new(g).ok_or(Error::SingularSystem)?;
+    // Theta G = Q  <=>  G Theta^T = Q^T (G symmetric).
+    let th = chol.solve(&stats.q().transpose()).transpose();
+    let objective = Adc2Objective::new(stats);
+    let (cost, _) = objective.cost_grad(&SVector::from_column_slice(th.as_slice()));
+    Ok(Adc2Solution {
+        t: t0 + th.fixed_view::<3, 3>(0, 0),
+        centre: centre0 + th.column(3),
+        iterations: 0,
+        cost,
+    })
+}
+
+/// One ADC2 step from the LS fit: artificial data (one pass), then the
+/// solve on the statistics, then the canonical `W' = (T' T'^T)^(-1/2)`.
+pub fn run<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+) -> Result<Estimate<T>, Error> {
+    let stats = Stats::accumulate(samples, norm, &ls.centre, &ls.w)?;
+    let sol = solve(&stats, &ls.t, &ls.centre, config.max_iterations)?;
+    Ok(Estimate {
+        centre: sol.centre,
+        w: sym_inv_sqrt(&(sol.t * sol.t.transpose()))?,
+        iterations: sol.iterations,
+        passes: 1,
+        warnings: Warnings::NONE,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Matrix4;
 
     /// Statistics of a made-up but consistent regression problem: 40
     /// directions, residuals that are an exact affine function of `[h, 1]`
@@ -141,7 +187,7 @@ mod tests {
             s_hh: Matrix3::zeros(),
             s_r: Vector3::zeros(),
             s_rh: Matrix3::zeros(),
-            j0: 0.0,
+            s_rr: Matrix3::zeros(),
         };
         for i in 0..40 {
             let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / 40.0;
@@ -154,7 +200,7 @@ mod tests {
             s.s_hh += h * h.transpose();
             s.s_r += res;
             s.s_rh += res * h.transpose();
-            s.j0 += res.norm_squared();
+            s.s_rr += res * res.transpose();
         }
         s
     }
@@ -164,8 +210,8 @@ mod tests {
         let st = stats();
         let obj = Adc2Objective::new(&st);
         // Closed form Theta = Q G^-1, by a 4x4 inverse.
-        let g_inv: Matrix4<f64> = obj.gram().try_inverse().unwrap();
-        let want = obj.q * g_inv;
+        let g_inv: Matrix4<f64> = st.gram().try_inverse().unwrap();
+        let want = st.q() * g_inv;
         let t0 = Matrix3::identity();
         let sol = solve(&st, &t0, &Vector3::zeros(), 50).unwrap();
         let got_t = sol.t - t0;
@@ -176,9 +222,9 @@ mod tests {
         // The cost tracked by the exact line model equals a fresh evaluation.
         let x = SVector::<f64, PARAMS>::from_column_slice(want.as_slice());
         let (fresh, grad) = obj.cost_grad(&x);
-        assert!((sol.cost - fresh).abs() < 1e-12 * st.j0);
+        assert!((sol.cost - fresh).abs() < 1e-12 * st.s_rr.trace());
         assert!(grad.amax() < 1e-12);
-        assert!(sol.cost < st.j0);
+        assert!(sol.cost < st.s_rr.trace());
     }
 
     #[test]
@@ -192,7 +238,7 @@ mod tests {
             s_hh: h * h.transpose() * 20.0,
             s_r: Vector3::new(0.1, 0.0, 0.0),
             s_rh: Matrix3::zeros(),
-            j0: 1.0,
+            s_rr: Matrix3::identity(),
         };
         let r = solve(&st, &Matrix3::identity(), &Vector3::zeros(), 50);
         assert_eq!(r.unwrap_err(), Error::SingularSystem);

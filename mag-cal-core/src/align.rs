@@ -1,0 +1,2 @@
+//! Step 2 of the calibration: alignment to a reference frame (orthogonal
+//! Procrustes).
