@@ -390,6 +390,116 @@ pub fn adc2(samples: &[[f64; 3]], variant: RefLs) -> Option<RefFit> {
     adc2_closed_form(samples, &start)
 }
 
+/// Iterated ADC2 by plain fixed-point iteration (design document, section
+/// 7): ADC2 in closed form, restarted from its own result, until the
+/// gauge-free change `max|dM| rho^2 + max|db| / rho` falls below `tol`.
+/// Returns the fit and the passes taken, or `None` after `max_passes`.
+pub fn adc2_plain_iteration(
+    samples: &[[f64; 3]],
+    start: &RefFit,
+    tol: f64,
+    max_passes: usize,
+) -> Option<(RefFit, usize)> {
+    let mut fit = *start;
+    for pass in 1..=max_passes {
+        let next = adc2_closed_form(samples, &fit)?;
+        let change =
+            (next.m - fit.m).amax() * next.rho * next.rho + (next.b - fit.b).amax() / next.rho;
+        fit = next;
+        if change < tol {
+            return Some((fit, pass));
+        }
+    }
+    None
+}
+
+/// subMLE (design document, section 8) minimised independently of the core:
+/// Levenberg-Marquardt on the residuals `z_i / sqrt(w_i)` (so that their
+/// squares sum to `J`) with a central-difference Jacobian, over the upper
+/// triangle of `A` and `b'` in normalised coordinates, started at the LS
+/// fit `start`. Stops when the relative step is below `1e-12`.
+pub fn submle(samples: &[[f64; 3]], start: &RefFit) -> Option<RefFit> {
+    let (c, s, xs) = normalise_checked(samples)?;
+    // Start: M' = s^2 M, A0 = upper Cholesky factor of M', b' = (b - c) / s.
+    let m0 = start.m * (s * s);
+    let a0 = m0.cholesky()?.l().transpose();
+    let b0 = (start.b - c) / s;
+    let mut p = nalgebra::DVector::from_vec(vec![
+        a0[(0, 0)],
+        a0[(0, 1)],
+        a0[(0, 2)],
+        a0[(1, 1)],
+        a0[(1, 2)],
+        a0[(2, 2)],
+        b0.x,
+        b0.y,
+        b0.z,
+    ]);
+    let residuals = |p: &nalgebra::DVector<f64>| -> nalgebra::DVector<f64> {
+        let a = Matrix3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5]);
+        let b = Vector3::new(p[6], p[7], p[8]);
+        nalgebra::DVector::from_iterator(
+            xs.len(),
+            xs.iter().map(|x| {
+                let u = a * (x - b);
+                let z = u.norm_squared() - 1.0;
+                z / (a.transpose() * u).norm()
+            }),
+        )
+    };
+    let mut lambda = 1e-3;
+    let mut r = residuals(&p);
+    let mut cost = r.norm_squared();
+    for _ in 0..200 {
+        let mut jac = DMatrix::<f64>::zeros(xs.len(), 9);
+        for k in 0..9 {
+            let h = 1e-7 * (1.0 + p[k].abs());
+            let (mut pp, mut pm) = (p.clone(), p.clone());
+            pp[k] += h;
+            pm[k] -= h;
+            jac.set_column(k, &((residuals(&pp) - residuals(&pm)) / (2.0 * h)));
+        }
+        let jtj = jac.transpose() * &jac;
+        let jtr = jac.transpose() * &r;
+        let mut accepted = false;
+        for _ in 0..30 {
+            let mut lhs = jtj.clone();
+            for k in 0..9 {
+                lhs[(k, k)] += lambda * (1.0 + jtj[(k, k)]);
+            }
+            let step = lhs.cholesky()?.solve(&(-&jtr));
+            let trial = &p + &step;
+            let r_trial = residuals(&trial);
+            let c_trial = r_trial.norm_squared();
+            if c_trial <= cost {
+                let small = step.amax() <= 1e-12 * (1.0 + p.amax());
+                p = trial;
+                r = r_trial;
+                cost = c_trial;
+                lambda = (lambda * 0.3).max(1e-12);
+                accepted = true;
+                if small {
+                    return submle_fit(&p, c, s);
+                }
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !accepted {
+            // No decrease at any damping: converged to rounding.
+            return submle_fit(&p, c, s);
+        }
+    }
+    None
+}
+
+fn submle_fit(p: &nalgebra::DVector<f64>, c: Vector3<f64>, s: f64) -> Option<RefFit> {
+    let a = Matrix3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5]);
+    let m_prime = a.transpose() * a;
+    let b = c + Vector3::new(p[6], p[7], p[8]) * s;
+    RefFit::from_b_m(b, m_prime / (s * s))
+}
+
 /// Symmetric positive definite square root `V diag(sqrt(lambda)) V^T` of a 3x3
 /// SPD matrix (eigen-decomposition of its symmetric part). `None` unless every
 /// eigenvalue is positive and finite.
