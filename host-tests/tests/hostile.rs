@@ -58,7 +58,7 @@ fn samples() -> impl Strategy<Value = Vec<[f64; 3]>> {
 }
 
 fn check<T: Real>(y: &[[f64; 3]]) -> Result<(), TestCaseError> {
-    for method in [Method::Ls, Method::Adc2] {
+    for method in Method::ALL {
         for ls in [LsVariant::Ls9, LsVariant::Svd10, LsVariant::LiGriffiths] {
             let cfg = Config {
                 method,
