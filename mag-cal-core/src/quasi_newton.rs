@@ -197,20 +197,22 @@ fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
 }
 
 /// Anderson acceleration (type II) of a fixed-point iteration `x = g(x)` in
-/// `D` dimensions with memory `M`, on the stack.
+/// `D` dimensions with memory `M` and mixing `beta`, on the stack.
 ///
-/// Given the current iterate `x_k` and its image `g_k = g(x_k)`, the next
-/// iterate is `g_k - dG gamma` with `gamma` the least-squares solution of
-/// `dF gamma ~ f_k`, where `f = g(x) - x` are the residuals and `dF`, `dG`
-/// hold the last `M` differences of residuals and images. The least squares
-/// is solved through its normal equations with a Tikhonov term of
-/// `sqrt(eps)` of their trace (the columns grow collinear as the iteration
-/// converges); a failed solve falls back to the plain step and a fresh
-/// history. Undamped, as in the design document's prototype.
+/// Given the current iterate `x_k` and its image `g_k = g(x_k)`, with
+/// residuals `f = g(x) - x`, the next iterate is
+/// `x_k + beta f_k - (dX + beta dF) gamma`, where `dX`, `dF` hold the last
+/// `M` differences of iterates and residuals and `gamma` is the
+/// least-squares solution of `dF gamma ~ f_k` (with `beta = 1` this is the
+/// familiar `g_k - dG gamma`). The least squares is solved through its
+/// normal equations with a Tikhonov term of 64 ulps of their trace (the
+/// columns grow collinear as the iteration converges); a failed solve falls
+/// back to the mixing step and a fresh history.
 #[derive(Clone, Debug)]
 pub struct Anderson<T: Real, const D: usize, const M: usize> {
+    mixing: T,
+    d_x: SMatrix<T, D, M>,
     d_f: SMatrix<T, D, M>,
-    d_g: SMatrix<T, D, M>,
     last: Option<(SVector<T, D>, SVector<T, D>)>,
     len: usize,
     next: usize,
@@ -223,36 +225,44 @@ impl<T: Real, const D: usize, const M: usize> Default for Anderson<T, D, M> {
 }
 
 impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
-    /// An accelerator with no history.
+    /// An accelerator with no history and mixing 1 (the plain step
+    /// `g(x)` when there is no history).
     pub fn new() -> Self {
+        Self::with_mixing(T::one())
+    }
+
+    /// An accelerator whose step without history is `x + mixing (g(x) - x)`.
+    pub fn with_mixing(mixing: T) -> Self {
         Self {
+            mixing,
+            d_x: SMatrix::zeros(),
             d_f: SMatrix::zeros(),
-            d_g: SMatrix::zeros(),
             last: None,
             len: 0,
             next: 0,
         }
     }
 
-    /// Forgets the history (the next step is a plain fixed-point step).
+    /// Forgets the history (the next step is a plain mixing step).
     pub fn reset(&mut self) {
-        *self = Self::new();
+        *self = Self::with_mixing(self.mixing);
     }
 
     /// The next iterate from `x_k` and `g_k = g(x_k)`.
     pub fn step(&mut self, x: &SVector<T, D>, g: &SVector<T, D>) -> SVector<T, D> {
         let f = g - x;
-        if let Some((f_prev, g_prev)) = self.last.replace((f, *g)) {
+        let plain = x + f * self.mixing;
+        if let Some((x_prev, f_prev)) = self.last.replace((*x, f)) {
             if M > 0 {
                 let k = self.next % M;
+                self.d_x.set_column(k, &(x - x_prev));
                 self.d_f.set_column(k, &(f - f_prev));
-                self.d_g.set_column(k, &(g - g_prev));
                 self.next = (k + 1) % M;
                 self.len = (self.len + 1).min(M);
             }
         }
         if self.len == 0 {
-            return *g;
+            return plain;
         }
         let mut normal = self.d_f.transpose() * self.d_f;
         let ridge = normal.trace() * T::EPSILON * T::lit(64.0);
@@ -261,21 +271,15 @@ impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
             normal[(i, i)] += if i < self.len { ridge } else { T::one() };
         }
         let rhs = self.d_f.transpose() * f;
-        match Cholesky::new(normal) {
-            Some(c) => {
-                let gamma = c.solve(&rhs);
-                let next = g - self.d_g * gamma;
-                if next.iter().all(|v| v.is_finite()) {
-                    return next;
-                }
-                self.reset();
-                *g
-            }
-            None => {
-                self.reset();
-                *g
+        if let Some(c) = Cholesky::new(normal) {
+            let gamma = c.solve(&rhs);
+            let next = plain - (self.d_x + self.d_f * self.mixing) * gamma;
+            if next.iter().all(|v| v.is_finite()) {
+                return next;
             }
         }
+        self.reset();
+        plain
     }
 }
 
