@@ -24,18 +24,19 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
+use mag_cal_core::heading::{heading_deg, wrap_deg, HeadingSmoother, DEFAULT_WINDOW};
 use mag_cal_core::nalgebra::Vector3;
 use mag_cal_core::{calibrate, Calibration, Config, SampleStore};
 
-use firmware_example::heading::{heading_rad, wrap_180, wrap_360, CircularMean};
+use firmware_example::heading::wrap_360;
 use firmware_example::{coverage, platform, Truth};
 
 /// Samples collected for the calibration.
 const SAMPLES: usize = 600;
 /// Progress is logged every this many samples.
 const PROGRESS_EVERY: usize = 100;
-/// Window of the heading smoother.
-const SMOOTHING: usize = 15;
+/// Window of the heading smoother (15, the paper's best).
+const SMOOTHING: usize = DEFAULT_WINDOW;
 /// Headings streamed after the calibration (a compass swing in steps of
 /// 10 deg), one per `SMOOTHING` samples.
 const HEADINGS: u32 = 36;
@@ -187,30 +188,30 @@ fn main() -> ! {
 
     // --- calibrated heading over a level turn
     bench.begin_level_turn(HEADINGS, SMOOTHING as u32);
-    let mut smoothed = CircularMean::<SMOOTHING>::new();
-    let mut smoothed_raw = CircularMean::<SMOOTHING>::new();
-    let mut smoothed_truth = CircularMean::<SMOOTHING>::new();
+    let mut smoothed = HeadingSmoother::<f32, SMOOTHING>::new();
+    let mut smoothed_raw = HeadingSmoother::<f32, SMOOTHING>::new();
+    let mut smoothed_truth = HeadingSmoother::<f32, SMOOTHING>::new();
     let mut heading_max_err_deg = 0.0f32;
     let mut raw_max_err_deg = 0.0f32;
     for k in 0..HEADINGS {
         for _ in 0..SMOOTHING {
             let raw = read_sample(&mut sensor, delay).map(f32::from);
-            smoothed.push(heading_rad(&cal.apply(raw)));
+            smoothed.push(heading_deg(&cal.apply(raw)));
             // The same reading without calibration, for contrast.
-            smoothed_raw.push(heading_rad(&Vector3::from(raw)));
+            smoothed_raw.push(heading_deg(&Vector3::from(raw)));
             if let Some(t) = bench.true_heading_deg() {
-                smoothed_truth.push(t.to_radians());
+                smoothed_truth.push(t);
             }
         }
-        let Some(h) = smoothed.mean_rad() else {
+        let Some(h) = smoothed.mean() else {
             continue;
         };
-        let h = wrap_360(h.to_degrees());
-        match (smoothed_truth.mean_rad(), smoothed_raw.mean_rad()) {
+        let h = wrap_360(h);
+        match (smoothed_truth.mean(), smoothed_raw.mean()) {
             (Some(t), Some(r)) => {
-                let t = wrap_360(t.to_degrees());
-                let err = wrap_180(h - t);
-                let raw_err = wrap_180(r.to_degrees() - t);
+                let t = wrap_360(t);
+                let err = wrap_deg(h - t);
+                let raw_err = wrap_deg(r - t);
                 heading_max_err_deg = heading_max_err_deg.max(libm::fabsf(err));
                 raw_max_err_deg = raw_max_err_deg.max(libm::fabsf(raw_err));
                 info!(

@@ -2,12 +2,14 @@
 //!
 //! Each option value is a small [`ValueEnum`] whose names clap checks
 //! (a bad value is a usage error, exit 2) and which maps onto the core's
-//! type. A new core method is one more variant of [`MethodArg`] and one
-//! more arm in [`MethodArg::to_core`]; a new subcommand is one more variant
-//! of [`Command`].
+//! type. The method names come from the core ([`Method::ALL`],
+//! [`Method::name`]), so a new core method needs no change here beyond,
+//! optionally, its help line in [`method_help`]; a new subcommand is one
+//! more variant of [`Command`].
 
 use std::path::PathBuf;
 
+use clap::builder::PossibleValue;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mag_cal_core::{LsVariant, Method};
 
@@ -48,6 +50,8 @@ pub struct Cli {
 pub enum Command {
     /// Fit a calibration to a file of raw samples and print it
     Fit(FitArgs),
+    /// Apply a calibration (from 'magcal fit --format json') to a file of raw samples
+    Apply(ApplyArgs),
 }
 
 /// Options of `magcal fit`.
@@ -59,10 +63,10 @@ pub struct FitArgs {
     pub file: PathBuf,
 
     /// Calibration method
-    #[arg(long, value_enum, default_value_t = MethodArg::Adc2)]
+    #[arg(long, value_enum, default_value_t = MethodArg(Method::Adc2))]
     pub method: MethodArg,
 
-    /// Least-squares ellipsoid fit used by 'ls' and as the start of 'adc2'
+    /// Least-squares ellipsoid fit: the 'ls' result, and the start of the other methods
     #[arg(long, value_enum, default_value_t = LsArg::Ls9)]
     pub ls: LsArg,
 
@@ -77,24 +81,134 @@ pub struct FitArgs {
     /// Header names of the x, y, z columns, e.g. magx,magy,magz
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
+
+    /// Per-axis noise standard deviation, sensor units, for adc1 (a
+    /// diagonal covariance); without it adc1 estimates the covariance from
+    /// the LS residuals
+    #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_noise_std)]
+    pub noise_std: Option<NoiseStd>,
+
+    /// Also draw the samples before and after calibration into an SVG file
+    #[arg(long, value_name = "OUT.svg")]
+    pub plot: Option<PathBuf>,
 }
 
-/// `--method`: the calibration method, by its core name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// Algebraic least-squares ellipsoid fit alone
-    Ls,
-    /// LS fit, then artificial-data re-estimation by quasi-Newton
-    Adc2,
+/// Text after the help of `magcal apply`.
+const APPLY_AFTER_HELP: &str = "\
+CAL.json is what 'magcal fit --format json' prints; only its hard_iron and
+soft_iron are read. FILE is read as by 'magcal fit'.
+
+Output: CSV on stdout, header 'x,y,z', then one calibrated sample per input
+row: W (raw - b) on the unit sphere, or with --scaled times the field strength
+(sensor units). When FILE has accelerometer columns (--accel-columns, or a
+header holding accx,accy,accz / ax,ay,az / acc_x,acc_y,acc_z) two columns
+follow: heading_deg, the tilt-compensated heading of the sensor's x axis from
+magnetic north towards east, in degrees in (-180, 180] (empty where undefined:
+non-finite or zero readings, field along gravity), and heading_smoothed_deg,
+the circular mean of the last --window defined headings. The accelerometer
+reading is the specific force at rest (pointing up; its unit does not matter).
+The calibrated frame is the canonical one (symmetric W), not aligned to the
+accelerometer's axes: for headings the two sensors must share right-handed
+axes. Rows with non-finite values give 'nan' coordinates and an empty heading.
+
+Exit status: 0 success, 2 usage, I/O, parse or calibration-file error.";
+
+/// Largest `--window`: the capacity of the heading smoother.
+pub const MAX_WINDOW: usize = 128;
+
+/// Options of `magcal apply`.
+#[derive(Debug, Args)]
+#[command(after_help = APPLY_AFTER_HELP)]
+pub struct ApplyArgs {
+    /// Calibration: the JSON object printed by 'magcal fit --format json'
+    #[arg(value_name = "CAL.json")]
+    pub calibration: PathBuf,
+
+    /// Input file of raw samples (CSV or whitespace separated), '-' for stdin
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+
+    /// Header names of the x, y, z columns, e.g. magx,magy,magz
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
+    pub columns: Option<Columns>,
+
+    /// Header names of the accelerometer columns (default: detected from the
+    /// header); adds heading columns
+    #[arg(long, value_name = "AX,AY,AZ", value_parser = parse_columns)]
+    pub accel_columns: Option<Columns>,
+
+    /// Samples in the heading's circular moving average, 1..=128
+    #[arg(
+        long,
+        value_name = "W",
+        default_value_t = default_window(),
+        value_parser = clap::value_parser!(u16).range(1..=MAX_WINDOW as i64)
+    )]
+    pub window: u16,
+
+    /// Print in sensor units (times the field strength), not on the unit sphere
+    #[arg(long)]
+    pub scaled: bool,
 }
+
+/// The core's default smoothing window, as a `--window` value.
+fn default_window() -> u16 {
+    u16::try_from(mag_cal_core::heading::DEFAULT_WINDOW.min(MAX_WINDOW)).unwrap_or(15)
+}
+
+/// `--method`: a core [`Method`], by its core name.
+///
+/// The accepted names are [`Method::ALL`] through [`Method::name`], so a new
+/// core method appears here (and in the help) without a change to the CLI;
+/// [`method_help`] adds its one-line description.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MethodArg(pub Method);
+
+/// Every method the core offers, in [`Method::ALL`] order.
+static METHODS: [MethodArg; Method::ALL.len()] = {
+    let mut out = [MethodArg(Method::ALL[0]); Method::ALL.len()];
+    let mut i = 1;
+    while i < out.len() {
+        out[i] = MethodArg(Method::ALL[i]);
+        i += 1;
+    }
+    out
+};
 
 impl MethodArg {
     /// The core's method.
     pub fn to_core(self) -> Method {
-        match self {
-            MethodArg::Ls => Method::Ls,
-            MethodArg::Adc2 => Method::Adc2,
+        self.0
+    }
+}
+
+impl ValueEnum for MethodArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        &METHODS
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(PossibleValue::new(self.0.name()).help(method_help(self.0)))
+    }
+}
+
+/// One line of help for `method` (empty for a method this CLI does not
+/// know yet; its name is still accepted).
+pub fn method_help(method: Method) -> &'static str {
+    match method {
+        Method::Ls => "Algebraic least-squares ellipsoid fit alone",
+        Method::Adc1 => {
+            "LS fit, artificial data, noise-weighted re-estimate (the paper's ADC1; \
+             same minimiser as adc2)"
         }
+        Method::Adc2 => "LS fit, then artificial-data re-estimation by quasi-Newton",
+        Method::Adc2Iterated => {
+            "ADC2 repeated to its fixed point: as accurate as submle, one pass per step"
+        }
+        Method::SubMle => {
+            "Approximate maximum likelihood (Vasconcelos et al.), the paper's baseline; slowest"
+        }
+        _ => "",
     }
 }
 
@@ -161,6 +275,42 @@ fn parse_columns(text: &str) -> Result<Columns, String> {
     }
 }
 
+/// `--noise-std`: three positive per-axis standard deviations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseStd(pub [f64; 3]);
+
+impl NoiseStd {
+    /// The diagonal covariance `diag(s^2)`, sensor units squared.
+    pub fn covariance(self) -> [[f64; 3]; 3] {
+        let [x, y, z] = self.0.map(|s| s * s);
+        [[x, 0.0, 0.0], [0.0, y, 0.0], [0.0, 0.0, z]]
+    }
+}
+
+/// Parses `SX,SY,SZ` into three finite positive numbers whose squares are
+/// finite and positive.
+fn parse_noise_std(text: &str) -> Result<NoiseStd, String> {
+    let values: Vec<Option<f64>> = text.split(',').map(|s| s.trim().parse().ok()).collect();
+    match <[Option<f64>; 3]>::try_from(values) {
+        Ok([Some(x), Some(y), Some(z)]) => {
+            let std = [x, y, z];
+            if std.iter().all(|&s| {
+                let v = s * s;
+                s > 0.0 && v.is_finite() && v > 0.0
+            }) {
+                Ok(NoiseStd(std))
+            } else {
+                Err(
+                    "each standard deviation must be a positive number (squares \
+                     within the range of f64)"
+                        .into(),
+                )
+            }
+        }
+        _ => Err("expected three comma-separated numbers, e.g. 0.6,0.6,0.9".into()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,11 +351,74 @@ mod tests {
     #[test]
     fn defaults() {
         let cli = Cli::try_parse_from(["magcal", "fit", "x.csv"]).expect("parses");
-        let Command::Fit(args) = cli.command;
-        assert_eq!(args.method, MethodArg::Adc2);
+        let Command::Fit(args) = cli.command else {
+            panic!("fit parses as fit");
+        };
+        assert_eq!(args.method, MethodArg(Method::Adc2));
         assert_eq!(args.ls, LsArg::Ls9);
         assert_eq!(args.precision, Precision::F64);
         assert_eq!(args.format, Format::Text);
         assert_eq!(args.columns, None);
+        assert_eq!(args.noise_std, None);
+        assert_eq!(args.plot, None);
+
+        let cli = Cli::try_parse_from(["magcal", "apply", "c.json", "x.csv"]).expect("parses");
+        let Command::Apply(args) = cli.command else {
+            panic!("apply parses as apply");
+        };
+        assert_eq!(
+            usize::from(args.window),
+            mag_cal_core::heading::DEFAULT_WINDOW
+        );
+        assert!(!args.scaled && args.accel_columns.is_none());
+    }
+
+    #[test]
+    fn every_core_method_is_accepted() {
+        for method in Method::ALL {
+            let cli = Cli::try_parse_from(["magcal", "fit", "x.csv", "--method", method.name()])
+                .expect("parses");
+            let Command::Fit(args) = cli.command else {
+                panic!("fit parses as fit");
+            };
+            assert_eq!(args.method.to_core(), method);
+            assert!(!method_help(method).is_empty(), "{method:?} has no help");
+        }
+    }
+
+    #[test]
+    fn window_is_bounded() {
+        for (w, ok) in [
+            ("1", true),
+            ("128", true),
+            ("0", false),
+            ("129", false),
+            ("x", false),
+        ] {
+            let r = Cli::try_parse_from(["magcal", "apply", "c", "f", "--window", w]);
+            assert_eq!(r.is_ok(), ok, "{w}");
+        }
+    }
+
+    #[test]
+    fn noise_std_needs_three_positive_numbers() {
+        assert_eq!(parse_noise_std("0.5, 1,2"), Ok(NoiseStd([0.5, 1.0, 2.0])));
+        assert_eq!(
+            NoiseStd([0.5, 1.0, 2.0]).covariance(),
+            [[0.25, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 4.0]]
+        );
+        for bad in [
+            "1,2",
+            "1,2,3,4",
+            "1,x,3",
+            "0,1,1",
+            "-1,1,1",
+            "nan,1,1",
+            "inf,1,1",
+            "1e200,1,1",
+            "1e-200,1,1",
+        ] {
+            assert!(parse_noise_std(bad).is_err(), "{bad}");
+        }
     }
 }

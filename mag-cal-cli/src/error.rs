@@ -33,6 +33,13 @@ pub enum CliError {
     Input(String),
     /// The report could not be written to stdout.
     Write(io::Error),
+    /// An output file (the plot) could not be written.
+    WriteFile {
+        /// File name as given.
+        path: String,
+        /// The underlying error.
+        err: io::Error,
+    },
     /// The core refused to calibrate.
     Refused(mag_cal_core::Error),
 }
@@ -51,11 +58,19 @@ impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CliError::Read { source_name, err } => {
-                write!(f, "cannot read {source_name}: {}", io_reason(err))
+                write!(
+                    f,
+                    "cannot read {}: {}",
+                    one_line(source_name),
+                    io_reason(err)
+                )
             }
             CliError::Parse { line, message } => write!(f, "line {line}: {message}"),
             CliError::Input(message) => f.write_str(message),
             CliError::Write(err) => write!(f, "cannot write output: {}", io_reason(err)),
+            CliError::WriteFile { path, err } => {
+                write!(f, "cannot write {}: {}", one_line(path), io_reason(err))
+            }
             CliError::Refused(err) => write!(f, "calibration refused: {err}"),
         }
     }
@@ -64,7 +79,9 @@ impl fmt::Display for CliError {
 impl std::error::Error for CliError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            CliError::Read { err, .. } | CliError::Write(err) => Some(err),
+            CliError::Read { err, .. } | CliError::Write(err) | CliError::WriteFile { err, .. } => {
+                Some(err)
+            }
             CliError::Refused(err) => Some(err),
             CliError::Parse { .. } | CliError::Input(_) => None,
         }
@@ -75,6 +92,21 @@ impl From<mag_cal_core::Error> for CliError {
     fn from(err: mag_cal_core::Error) -> Self {
         CliError::Refused(err)
     }
+}
+
+/// `text` with control characters (line breaks, escapes) written as Rust
+/// escapes, so that a message stays on one line.
+pub fn one_line(text: &str) -> String {
+    text.chars()
+        .flat_map(|c| {
+            let escaped: Vec<char> = if c.is_control() {
+                c.escape_debug().collect()
+            } else {
+                vec![c]
+            };
+            escaped
+        })
+        .collect()
 }
 
 /// The operating system's reason without Rust's ` (os error N)` suffix:
@@ -102,6 +134,18 @@ mod tests {
             "cannot read foo.csv: No such file or directory"
         );
         assert_eq!(err.exit_code(), 2);
+    }
+
+    #[test]
+    fn paths_stay_on_one_line() {
+        let err = CliError::WriteFile {
+            path: "a\nb\u{1b}.svg".into(),
+            err: io::Error::from_raw_os_error(13),
+        };
+        assert_eq!(
+            err.to_string(),
+            "cannot write a\\nb\\u{1b}.svg: Permission denied"
+        );
     }
 
     #[test]

@@ -3,20 +3,22 @@
 use std::io::Write;
 use std::time::Instant;
 
-use mag_cal_core::{calibrate, Config, Real};
+use mag_cal_core::nalgebra::{Matrix3, Vector3};
+use mag_cal_core::{calibrate, Calibration, Config, Method, Real};
 use serde::Serialize;
 
-use crate::cli::{FitArgs, Format, Precision};
+use crate::cli::{FitArgs, Format, NoiseStd, Precision};
 use crate::error::CliError;
 use crate::input::{self, Source};
 use crate::output;
+use crate::svg::{self, PlotTitle};
 
 /// The result of a fit, widened to `f64`: what both output formats print.
 ///
 /// Serialised as the JSON object of `--format json`, in field order.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Outcome {
-    /// Method name (`ls`, `adc2`).
+    /// Method name (`ls`, `adc1`, `adc2`, `adc2-iter`, `submle`).
     pub method: &'static str,
     /// LS variant name (`ls9`, `svd10`, `lg10`).
     pub ls: &'static str,
@@ -35,6 +37,10 @@ pub struct Outcome {
     pub field_strength: f64,
     /// Quasi-Newton iterations (0 for `ls`).
     pub iterations: u32,
+    /// Passes over the samples after the LS fit (0 for `ls`, 1 for `adc1`
+    /// and `adc2`, one per step for `adc2-iter`, one per cost evaluation
+    /// for `submle`).
+    pub passes: u32,
     /// Wall time of the `calibrate` call alone, microseconds.
     pub timing_us: f64,
     /// How well the calibration fits the samples.
@@ -42,25 +48,49 @@ pub struct Outcome {
 }
 
 /// Quality figures of a fit.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Quality {
     /// RMS of `|W (y - b)| - 1` over the samples used (from the core).
     pub radial_rms: f64,
     /// Standard deviation over mean of `|W (y - b)|` over the samples used.
     pub norm_spread: f64,
+    /// Names of the core's warnings (`pass_cap`, ...), empty when none.
+    pub warnings: Vec<&'static str>,
 }
 
 /// Runs `magcal fit`, writing the report to `out`.
 pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let source = Source::from_arg(&args.file);
     let bytes = source.read()?;
+    let method = args.method.to_core();
+    if args.noise_std.is_some() && method != Method::Adc1 {
+        return Err(CliError::Input(format!(
+            "--noise-std is used only by --method adc1, not {}",
+            method.name()
+        )));
+    }
     let samples = input::parse(&bytes, args.columns.as_ref(), &source.name())?;
     let config = Config {
-        method: args.method.to_core(),
+        method,
         ls: args.ls.to_core(),
+        noise_covariance: args.noise_std.map(NoiseStd::covariance),
         ..Config::default()
     };
     let outcome = fit(&samples, &config, args.precision)?;
+    // The plot first: when it cannot be written, nothing is printed.
+    if let Some(path) = &args.plot {
+        let title = PlotTitle {
+            source: &source.file_name(),
+            method: outcome.method,
+            ls: outcome.ls,
+            radial_rms: outcome.quality.radial_rms,
+        };
+        let picture = svg::plot(&samples, &outcome.calibration()?, &title);
+        std::fs::write(path, picture).map_err(|err| CliError::WriteFile {
+            path: path.display().to_string(),
+            err,
+        })?;
+    }
     let report = match args.format {
         Format::Text => output::text(&outcome, &source.name()),
         Format::Json => output::json(&outcome),
@@ -68,6 +98,15 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
     out.write_all(report.as_bytes())
         .and_then(|()| out.flush())
         .map_err(CliError::Write)
+}
+
+impl Outcome {
+    /// The calibration as an `f64` core value (for the plot).
+    pub fn calibration(&self) -> Result<Calibration<f64>, CliError> {
+        let b = Vector3::from(self.hard_iron);
+        let w = Matrix3::from_fn(|r, c| self.soft_iron[r][c]);
+        Ok(Calibration::new(b, w)?)
+    }
 }
 
 /// Calibrates `samples` in the requested precision.
@@ -114,10 +153,12 @@ fn fit_in<T: Real>(
         soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
         field_strength: cal.field_strength().to_f64(),
         iterations: fit.report.iterations,
+        passes: fit.report.passes,
         timing_us: elapsed.as_secs_f64() * 1e6,
         quality: Quality {
             radial_rms: fit.report.radial_rms.to_f64(),
             norm_spread: spread(norms),
+            warnings: fit.report.warnings.iter().map(|w| w.name()).collect(),
         },
     })
 }
@@ -135,7 +176,6 @@ fn spread(values: impl Iterator<Item = f64> + Clone) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mag_cal_core::Method;
 
     /// Points on a shifted, stretched ellipsoid (a Fibonacci sphere).
     fn ellipsoid(n: usize) -> Vec<[f64; 3]> {
@@ -172,6 +212,28 @@ mod tests {
             assert!((o.hard_iron[0] - 300.0).abs() < tol, "{:?}", o.hard_iron);
             assert!(o.quality.norm_spread < 1e-4 && o.quality.radial_rms < 1e-4);
             assert!(o.timing_us >= 0.0);
+        }
+    }
+
+    #[test]
+    fn every_method_reports_passes_and_rebuilds() {
+        let samples = ellipsoid(200);
+        for method in Method::ALL {
+            let config = Config {
+                method,
+                ..Config::default()
+            };
+            let o = fit(&samples, &config, Precision::F64).expect("fits");
+            assert_eq!(o.method, method.name());
+            assert_eq!(
+                o.passes == 0,
+                method == Method::Ls,
+                "{method:?}: {}",
+                o.passes
+            );
+            assert!(o.quality.warnings.is_empty(), "{:?}", o.quality.warnings);
+            let cal = o.calibration().expect("rebuilds");
+            assert!((cal.field_strength() - o.field_strength).abs() < 1e-9 * o.field_strength);
         }
     }
 

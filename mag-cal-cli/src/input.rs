@@ -13,6 +13,8 @@
 //! - without `--columns` the first three fields of each row are x, y, z and
 //!   later fields are ignored; with `--columns` the named header fields are
 //!   used (case-insensitive), and only they have to be numbers;
+//! - for `apply`, accelerometer columns are read the same way, named by
+//!   `--accel-columns` or found in the header ([`ACCEL_NAMES`]);
 //! - `nan`, `inf`, `-inf` and overflowing literals such as `1e400` are read
 //!   as non-finite numbers, which the core skips and counts as dropped.
 
@@ -46,6 +48,18 @@ impl Source {
         match self {
             Source::Stdin => "<stdin>".to_owned(),
             Source::File(path) => path.display().to_string(),
+        }
+    }
+
+    /// The name for a title: the file name without its folders, or
+    /// `<stdin>`.
+    pub fn file_name(&self) -> String {
+        match self {
+            Source::Stdin => "<stdin>".to_owned(),
+            Source::File(path) => path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
         }
     }
 
@@ -133,6 +147,49 @@ pub fn parse(
     columns: Option<&Columns>,
     source_name: &str,
 ) -> Result<Vec<[f64; 3]>, CliError> {
+    parse_with_accel(bytes, columns, Accel::None, source_name).map(|table| table.samples)
+}
+
+/// Which accelerometer columns to read beside the samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accel<'a> {
+    /// None.
+    None,
+    /// The named header fields (an error when absent).
+    Named(&'a Columns),
+    /// The first of [`ACCEL_NAMES`] whose three names are all in the header,
+    /// if any (and if they are not the sample columns themselves).
+    Detect,
+}
+
+/// Accelerometer column names recognised by [`Accel::Detect`], compared
+/// case-insensitively.
+pub const ACCEL_NAMES: [[&str; 3]; 5] = [
+    ["accx", "accy", "accz"],
+    ["acc_x", "acc_y", "acc_z"],
+    ["ax", "ay", "az"],
+    ["accelx", "accely", "accelz"],
+    ["accel_x", "accel_y", "accel_z"],
+];
+
+/// The rows of an input: samples and, when requested and present,
+/// accelerometer readings of the same rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    /// `[x, y, z]` per row.
+    pub samples: Vec<[f64; 3]>,
+    /// `[ax, ay, az]` per row, when accelerometer columns were found.
+    pub accel: Option<Vec<[f64; 3]>>,
+}
+
+/// Parses input bytes into samples and, as `accel` asks, accelerometer
+/// readings (see the module docs).
+pub fn parse_with_accel(
+    bytes: &[u8],
+    columns: Option<&Columns>,
+    accel: Accel<'_>,
+    source_name: &str,
+) -> Result<Table, CliError> {
     let text = String::from_utf8_lossy(bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let mut lines = content_lines(text);
@@ -142,54 +199,77 @@ pub fn parse(
     let separator = Separator::detect(first);
     let first_fields = separator.fields(first);
     let has_header = first_fields.iter().any(|f| number(f).is_none());
+    let header = has_header.then_some(first_fields.as_slice());
+    let needs_header = |option: &str| {
+        CliError::Input(format!(
+            "{source_name}: {option} needs a header line naming the columns, \
+             but line {first_no} is data"
+        ))
+    };
 
-    let indices = match columns {
-        None => [0, 1, 2],
-        Some(Columns(names)) if has_header => {
-            let mut indices = [0; 3];
-            for (index, name) in indices.iter_mut().zip(names) {
-                *index = first_fields
-                    .iter()
-                    .position(|f| f.eq_ignore_ascii_case(name))
-                    .ok_or_else(|| {
-                        CliError::Input(format!(
-                            "{source_name}: no column named '{}' in the header (columns: {})",
-                            excerpt(name),
-                            excerpt(&first_fields.join(", "))
-                        ))
-                    })?;
-            }
-            indices
+    let indices = match (columns, header) {
+        (None, _) => [0, 1, 2],
+        (Some(Columns(names)), Some(header)) => named_indices(header, names, source_name)?,
+        (Some(_), None) => return Err(needs_header("--columns")),
+    };
+    let accel_indices = match (accel, header) {
+        (Accel::None, _) | (Accel::Detect, None) => None,
+        (Accel::Named(Columns(names)), Some(header)) => {
+            Some(named_indices(header, names, source_name)?)
         }
-        Some(_) => {
-            return Err(CliError::Input(format!(
-                "{source_name}: --columns needs a header line naming the columns, \
-                 but line {first_no} is data"
-            )))
-        }
+        (Accel::Named(_), None) => return Err(needs_header("--accel-columns")),
+        (Accel::Detect, Some(header)) => ACCEL_NAMES
+            .iter()
+            .find_map(|names| named_indices(header, names, source_name).ok())
+            .filter(|found| *found != indices),
     };
 
     let data_first = (!has_header).then_some((first_no, first));
     let mut samples = Vec::new();
+    let mut accel_rows = accel_indices.map(|_| Vec::new());
     for (line_no, line) in data_first.into_iter().chain(lines) {
-        samples.push(parse_row(line_no, line, separator, &indices)?);
+        let fields = separator.fields(line);
+        samples.push(parse_row(line_no, &fields, &indices)?);
+        if let (Some(rows), Some(accel_indices)) = (accel_rows.as_mut(), accel_indices.as_ref()) {
+            rows.push(parse_row(line_no, &fields, accel_indices)?);
+        }
     }
     if samples.is_empty() {
         return Err(CliError::Input(format!(
             "{source_name}: no data rows after the header"
         )));
     }
-    Ok(samples)
+    Ok(Table {
+        samples,
+        accel: accel_rows,
+    })
+}
+
+/// The positions of `names` in `header` (case-insensitive).
+fn named_indices<S: AsRef<str>>(
+    header: &[&str],
+    names: &[S; 3],
+    source_name: &str,
+) -> Result<[usize; 3], CliError> {
+    let mut indices = [0; 3];
+    for (index, name) in indices.iter_mut().zip(names) {
+        let name = name.as_ref();
+        *index = header
+            .iter()
+            .position(|f| f.eq_ignore_ascii_case(name))
+            .ok_or_else(|| {
+                CliError::Input(format!(
+                    "{source_name}: no column named '{}' in the header (columns: {})",
+                    excerpt(name),
+                    excerpt(&header.join(", "))
+                ))
+            })?;
+    }
+    Ok(indices)
 }
 
 /// One data row: the fields at `indices`, as numbers.
-fn parse_row(
-    line_no: usize,
-    line: &str,
-    separator: Separator,
-    indices: &[usize; 3],
-) -> Result<[f64; 3], CliError> {
-    let fields = separator.fields(line);
+fn parse_row(line_no: usize, fields: &[&str], indices: &[usize; 3]) -> Result<[f64; 3], CliError> {
     let needed = indices.iter().max().map_or(0, |m| m + 1);
     if fields.len() < needed {
         return Err(CliError::Parse {
@@ -326,6 +406,52 @@ mod tests {
             err.starts_with("line 2: '\u{fffd}\\r\\u{1b}x")
                 && err.ends_with("...' is not a number")
         );
+    }
+
+    #[test]
+    fn accelerometer_columns() {
+        let text = "t,AccX,accy,accz,magx,magy,magz\n0,0.1,0.2,9.8,1,2,3\n1,0,0,9.7,4,5,6\n";
+        let c = cols("magx", "magy", "magz");
+        let t = parse_with_accel(text.as_bytes(), Some(&c), Accel::Detect, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8], [0.0, 0.0, 9.7]]));
+        let a = cols("accz", "accy", "accx");
+        let t = parse_with_accel(text.as_bytes(), Some(&c), Accel::Named(&a), "t").expect("parses");
+        assert_eq!(t.accel.as_ref().map(|a| a[0]), Some([9.8, 0.2, 0.1]));
+        let t = parse_with_accel(text.as_bytes(), Some(&c), Accel::None, "t").expect("parses");
+        assert_eq!(t.accel, None);
+
+        // Other spellings; none at all; the sample columns themselves.
+        let t = parse_with_accel(b"x,y,z,ax,ay,az\n1,2,3,4,5,6\n", None, Accel::Detect, "t")
+            .expect("parses");
+        assert_eq!(t.accel, Some(vec![[4.0, 5.0, 6.0]]));
+        let t = parse_with_accel(b"x,y,z,ax,ay\n1,2,3,4,5\n", None, Accel::Detect, "t")
+            .expect("parses");
+        assert_eq!(t.accel, None);
+        let t = parse_with_accel(b"acc_x,acc_y,acc_z\n1,2,3\n", None, Accel::Detect, "t")
+            .expect("parses");
+        assert_eq!(t.accel, None);
+        let t = parse_with_accel(b"1,2,3\n", None, Accel::Detect, "t").expect("parses");
+        assert_eq!(t.accel, None);
+
+        // Named but absent, or no header: errors.
+        let err = parse_with_accel(
+            text.as_bytes(),
+            Some(&c),
+            Accel::Named(&cols("a", "b", "c")),
+            "f",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("no column named 'a'"), "{err}");
+        let err = parse_with_accel(b"1,2,3\n", None, Accel::Named(&a), "f").unwrap_err();
+        assert!(
+            err.to_string().contains("--accel-columns needs a header"),
+            "{err}"
+        );
+        // Accelerometer fields must be numbers too.
+        let err = parse_with_accel(b"x,y,z,ax,ay,az\n1,2,3,4,,6\n", None, Accel::Detect, "f")
+            .unwrap_err();
+        assert_eq!(err.to_string(), "line 2: field 5 is empty");
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! `magcal`: calibrate recorded magnetometer logs with [`mag_cal_core`].
 //!
 //! The binary has no numerics of its own: it parses the command line and
-//! the input file, calls [`mag_cal_core::calibrate`], and formats the result.
+//! the input file, calls [`mag_cal_core::calibrate`] (or rebuilds a
+//! calibration and applies it), and formats the result.
 //!
 //! | module | what |
 //! |---|---|
@@ -9,17 +10,21 @@
 //! | [`input`] | reading a file or stdin and parsing it into samples |
 //! | [`fit`] | the `fit` subcommand: one call to the core, timed |
 //! | [`output`] | the text (for people) and JSON (for programs) reports |
+//! | [`svg`] | `fit --plot`: the samples before and after, as SVG |
+//! | [`apply`] | the `apply` subcommand: calibrated samples and headings as CSV |
 //! | [`error`] | the error type and its exit codes |
 //!
 //! Exit codes: 0 success, 2 usage, I/O or parse error, 3 calibration refused
 //! by the core. Every failure prints one line on stderr naming the reason
 //! (clap's usage errors start with such a line and add a usage hint).
 
+mod apply;
 mod cli;
 mod error;
 mod fit;
 mod input;
 mod output;
+mod svg;
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -52,6 +57,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(&args, &mut std::io::stdout().lock()),
+        Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),
     }
 }
 

@@ -36,6 +36,11 @@ pub fn text(o: &Outcome, source_name: &str) -> String {
         o.samples_used, o.samples_dropped
     );
     let _ = writeln!(s, "  iterations    {}", o.iterations);
+    let _ = writeln!(
+        s,
+        "  passes        {}  (over the samples, after the LS fit)",
+        o.passes
+    );
     let _ = writeln!(s, "  fit time      {:.0} us", o.timing_us);
     let _ = writeln!(s);
     let (b, scale) = block(&[o.hard_iron]);
@@ -61,6 +66,12 @@ pub fn text(o: &Outcome, source_name: &str) -> String {
         "  norm spread   {}  (std / mean of |W (raw - b)|)",
         sig(o.quality.norm_spread, 4)
     );
+    let warnings = if o.quality.warnings.is_empty() {
+        "none".to_owned()
+    } else {
+        o.quality.warnings.join(", ")
+    };
+    let _ = writeln!(s, "  warnings      {warnings}");
     let _ = writeln!(s);
     let _ = writeln!(
         s,
@@ -124,7 +135,7 @@ fn exponent_of(value: f64) -> i64 {
 /// `value` to `digits` significant digits, like C's `%g` but keeping
 /// trailing zeros: fixed notation for moderate magnitudes, scientific
 /// otherwise.
-fn sig(value: f64, digits: usize) -> String {
+pub fn sig(value: f64, digits: usize) -> String {
     let digits = digits.max(1);
     if !value.is_finite() || value == 0.0 {
         return format!("{value}");
@@ -160,10 +171,12 @@ mod tests {
             soft_iron: [[0.0041, 1e-5, 0.0], [1e-5, 0.0041, 0.0], [0.0, 0.0, 0.0039]],
             field_strength: 250.0,
             iterations: 5,
+            passes: 1,
             timing_us: 12.5,
             quality: Quality {
                 radial_rms: 0.0123,
                 norm_spread: f64::NAN,
+                warnings: vec!["pass_cap"],
             },
         }
     }
@@ -188,6 +201,8 @@ mod tests {
         assert_eq!(v["soft_iron"][0][1].as_f64(), Some(1e-5));
         assert!(v["quality"]["norm_spread"].is_null());
         assert_eq!(v["samples_dropped"].as_u64(), Some(2));
+        assert_eq!(v["passes"].as_u64(), Some(1));
+        assert_eq!(v["quality"]["warnings"], serde_json::json!(["pass_cap"]));
     }
 
     #[test]
@@ -206,5 +221,11 @@ mod tests {
         );
         assert!(t.contains("field strength  250.0000"));
         assert!(t.contains("calibrated = W (raw - b)"));
+        assert!(t.contains("  passes        1  "), "{t}");
+        assert!(t.contains("  warnings      pass_cap\n"), "{t}");
+        let mut quiet = outcome();
+        quiet.quality.warnings.clear();
+        assert!(text(&quiet, "f").contains("  warnings      none\n"));
+        assert!(json(&quiet).contains(r#""warnings":[]"#));
     }
 }

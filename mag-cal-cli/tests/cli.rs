@@ -315,6 +315,11 @@ fn help_and_version() {
         assert_eq!(r.code, 0);
         for needle in [
             "fit",
+            "apply",
+            "--accel-columns",
+            "--window",
+            "--noise-std",
+            "--plot",
             "--method",
             "--ls",
             "--precision",
@@ -332,6 +337,19 @@ fn help_and_version() {
     let r = magcal(&["fit", "--help"], None);
     assert_eq!(r.code, 0);
     assert!(r.stdout.contains("lg10") && r.stdout.contains("'-' for stdin"));
+    for method in METHODS {
+        assert!(
+            r.stdout.contains(&format!("- {method}:")),
+            "{method} in\n{}",
+            r.stdout
+        );
+    }
+    assert!(r
+        .stdout
+        .contains("estimates the covariance from the LS residuals"));
+    let r = magcal(&["apply", "--help"], None);
+    assert_eq!(r.code, 0);
+    assert!(r.stdout.contains("heading_smoothed_deg") && r.stdout.contains("CAL.json"));
     let r = magcal(&["--version"], None);
     assert_eq!(r.code, 0);
     assert_eq!(
@@ -507,4 +525,399 @@ fn hostile_input_never_panics() {
     let path = temp_file("garbage.bin", &rng.bytes(5000, &[]));
     let r = magcal(&["fit", &path], None);
     assert_eq!(r.code, 2, "{}", r.stderr);
+}
+
+/// The method names of the core, in the order of the paper's tables.
+const METHODS: [&str; 5] = ["ls", "submle", "adc1", "adc2", "adc2-iter"];
+
+#[test]
+fn every_method_via_json() {
+    let path = real("icm20948_mag_300.csv");
+    let mut hard_iron = Vec::new();
+    for method in METHODS {
+        let v = magcal(
+            &["fit", &path, "--method", method, "--format", "json"],
+            None,
+        )
+        .json();
+        for key in [
+            "method",
+            "ls",
+            "precision",
+            "samples_used",
+            "samples_dropped",
+            "hard_iron",
+            "soft_iron",
+            "field_strength",
+            "iterations",
+            "passes",
+            "timing_us",
+            "quality",
+        ] {
+            assert!(v.get(key).is_some(), "{method}: missing {key} in {v}");
+        }
+        assert_eq!(v["method"], method);
+        assert_eq!(v["samples_used"], 300);
+        let passes = v["passes"].as_u64().expect("passes");
+        assert_eq!(passes > 0, method != "ls", "{method}: passes {passes}");
+        let warnings = v["quality"]["warnings"].as_array().expect("warnings array");
+        assert!(
+            warnings.iter().all(Value::is_string),
+            "{method}: {warnings:?}"
+        );
+        let rms = v["quality"]["radial_rms"].as_f64().expect("radial_rms");
+        assert!(rms > 0.0 && rms < 0.05, "{method}: {rms}");
+        let b = vec3(&v["hard_iron"]);
+        for (got, want) in b.iter().zip(MAGNETO_B) {
+            assert!((got - want).abs() < 15.0, "{method}: {b:?}");
+        }
+        hard_iron.push((method, b));
+    }
+    // ADC1's minimiser is ADC2's for every noise weight (the core's
+    // documented SUR property).
+    let b = |name: &str| {
+        hard_iron
+            .iter()
+            .find(|(m, _)| *m == name)
+            .map(|(_, b)| *b)
+            .expect("fitted")
+    };
+    let (adc1, adc2) = (b("adc1"), b("adc2"));
+    for (one, two) in adc1.iter().zip(adc2) {
+        assert!(
+            (one - two).abs() <= 1e-6 * two.abs(),
+            "{adc1:?} vs {adc2:?}"
+        );
+    }
+}
+
+#[test]
+fn noise_std_is_for_adc1() {
+    let path = real("icm20948_mag_300.csv");
+    let base = ["fit", &path, "--format", "json", "--method"];
+    let plain = magcal(&[&base[..], &["adc1"]].concat(), None).json();
+    let weighted = magcal(
+        &[&base[..], &["adc1", "--noise-std", "1,2,0.5"]].concat(),
+        None,
+    )
+    .json();
+    let (b1, b2) = (vec3(&plain["hard_iron"]), vec3(&weighted["hard_iron"]));
+    for (one, two) in b1.iter().zip(b2) {
+        assert!((one - two).abs() <= 1e-6 * two.abs(), "{b1:?} vs {b2:?}");
+    }
+    magcal(
+        &[&base[..], &["adc2", "--noise-std", "1,1,1"]].concat(),
+        None,
+    )
+    .fails_with(2, "--noise-std is used only by --method adc1");
+    let r = magcal(
+        &[&base[..], &["adc1", "--noise-std", "1,0,1"]].concat(),
+        None,
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r
+        .stderr
+        .starts_with("error: invalid value '1,0,1' for '--noise-std"));
+}
+
+#[test]
+fn text_format_shows_passes_and_warnings() {
+    let path = real("icm20948_mag_300.csv");
+    let r = magcal(&["fit", &path, "--method", "adc2-iter"], None);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let passes = r
+        .stdout
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("passes"))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse::<u32>().ok())
+        .expect("passes line");
+    assert!(passes > 1, "{}", r.stdout);
+    assert!(r.stdout.contains("  warnings      none\n"), "{}", r.stdout);
+}
+
+/// Parses `magcal apply`'s CSV: the header and the rows of fields.
+fn csv(text: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut lines = text.lines();
+    let header = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(str::to_owned)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    (header, rows)
+}
+
+/// Fits `path` (with extra `args`) and writes the JSON to a scratch file.
+fn fitted(path: &str, args: &[&str], name: &str) -> String {
+    let run = magcal(
+        &[&["fit", path, "--format", "json"][..], args].concat(),
+        None,
+    );
+    run.json();
+    temp_file(name, run.stdout.as_bytes())
+}
+
+fn field(f: &str) -> f64 {
+    f.parse().unwrap_or_else(|_| panic!("not a number: {f:?}"))
+}
+
+#[test]
+fn apply_round_trip() {
+    let path = real("icm20948_mag_300.csv");
+    let cal = fitted(&path, &[], "icm.cal.json");
+    let r = magcal(&["apply", &cal, &path], None);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.is_empty());
+    let (header, rows) = csv(&r.stdout);
+    assert_eq!(header, ["x", "y", "z"]);
+    assert_eq!(rows.len(), 300);
+    let norms: Vec<f64> = rows
+        .iter()
+        .map(|row| {
+            assert_eq!(row.len(), 3);
+            row.iter().map(|f| field(f).powi(2)).sum::<f64>().sqrt()
+        })
+        .collect();
+    // One sample of this recording (index 141, the spike of the plot's
+    // norm panel) is an outlier at 1.12 (Magneto rejects 10 samples): all
+    // rows within 0.15 of 1, at most 1 % beyond 0.1.
+    assert!(norms.iter().all(|n| (n - 1.0).abs() < 0.15), "{norms:?}");
+    let beyond = norms.iter().filter(|n| (*n - 1.0).abs() >= 0.1).count();
+    assert!(beyond * 100 <= norms.len(), "{beyond} rows beyond 0.1");
+    let mean = norms.iter().sum::<f64>() / norms.len() as f64;
+    assert!((mean - 1.0).abs() < 0.01, "{mean}");
+
+    // --scaled: the same directions, times the field strength.
+    let v: Value = serde_json::from_slice(&std::fs::read(&cal).expect("cal")).expect("json");
+    let rho = v["field_strength"].as_f64().expect("rho");
+    let scaled = magcal(&["apply", &cal, &path, "--scaled"], None);
+    assert_eq!(scaled.code, 0, "{}", scaled.stderr);
+    let (_, scaled_rows) = csv(&scaled.stdout);
+    for (unit, sensor) in rows.iter().zip(&scaled_rows) {
+        for (u, s) in unit.iter().zip(sensor) {
+            assert!((field(u) * rho - field(s)).abs() <= 1e-9 * rho, "{u} {s}");
+        }
+    }
+
+    // Calibration from stdin; non-finite rows give nan, not a failure.
+    let cal_bytes = std::fs::read(&cal).expect("cal");
+    let data = temp_file("with_nan.csv", b"-231,29,161\nnan,1,2\n-233,35,inf\n");
+    let r = magcal(&["apply", "-", &data], Some(&cal_bytes));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (_, rows) = csv(&r.stdout);
+    assert_eq!(rows.len(), 3);
+    assert!(rows[0].iter().all(|f| field(f).is_finite()));
+    assert_eq!(rows[1], ["nan", "nan", "nan"]);
+    assert!(rows[2].iter().all(|f| f == "nan"), "{:?}", rows[2]);
+}
+
+/// Heading fields of an `apply` run with heading columns.
+fn headings(r: &Run) -> Vec<(Option<f64>, Option<f64>)> {
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (header, rows) = csv(&r.stdout);
+    assert_eq!(
+        header,
+        ["x", "y", "z", "heading_deg", "heading_smoothed_deg"]
+    );
+    let opt = |f: &str| (!f.is_empty()).then(|| field(f));
+    rows.iter()
+        .map(|row| {
+            assert_eq!(row.len(), 5, "{row:?}");
+            (opt(&row[3]), opt(&row[4]))
+        })
+        .collect()
+}
+
+#[test]
+fn apply_with_headings_on_imu_gnss() {
+    let path = real("imu_gnss_1252.csv");
+    let cal = fitted(&path, &["--columns", "magx,magy,magz"], "imu.cal.json");
+    let mag = ["--columns", "magx,magy,magz"];
+    let auto = magcal(&[&["apply", &cal, &path][..], &mag].concat(), None);
+    let h = headings(&auto);
+    assert_eq!(h.len(), 1252);
+    let in_range = |v: f64| v > -180.0 && v <= 180.0;
+    for (heading, smoothed) in &h {
+        let heading = heading.expect("defined: the sensor is at rest-ish, not vertical");
+        assert!(in_range(heading), "{heading}");
+        assert!(smoothed.is_some_and(in_range), "{smoothed:?}");
+    }
+    // The same columns named explicitly; window 1 is no smoothing.
+    let named = magcal(
+        &[
+            &["apply", &cal, &path][..],
+            &mag,
+            &["--accel-columns", "ACCX,accy,accz", "--window", "1"],
+        ]
+        .concat(),
+        None,
+    );
+    let same = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => ((a - b + 540.0).rem_euclid(360.0) - 180.0).abs() < 1e-9,
+        _ => false,
+    };
+    for ((a, _), (b, smoothed)) in h.iter().zip(headings(&named)) {
+        assert_eq!(*a, b);
+        assert!(same(b, smoothed), "{b:?} vs {smoothed:?}");
+    }
+    // No accelerometer: no heading columns.
+    let plain = magcal(&["apply", &cal, &real("icm20948_mag_300.csv")], None);
+    assert!(plain.stdout.starts_with("x,y,z\n"));
+    // A bad window is a usage error.
+    for w in ["0", "129", "x"] {
+        let r = magcal(&["apply", &cal, &path, "--window", w], None);
+        assert_eq!(r.code, 2, "{w}: {}", r.stderr);
+    }
+    magcal(
+        &[
+            &["apply", &cal, &path][..],
+            &mag,
+            &["--accel-columns", "a,b,c"],
+        ]
+        .concat(),
+        None,
+    )
+    .fails_with(2, "no column named 'a'");
+}
+
+/// Every number in the coordinate attributes of an SVG document.
+fn svg_coordinates(svg: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for attr in [
+        " x=", " y=", " x1=", " y1=", " x2=", " y2=", " cx=", " cy=", " r=", " d=",
+    ] {
+        for piece in svg.split(attr).skip(1) {
+            let value = piece
+                .strip_prefix('"')
+                .and_then(|p| p.split('"').next())
+                .expect("quoted attribute");
+            out.extend(
+                value
+                    .split(|c: char| c.is_ascii_alphabetic() && c != 'e' || c == ' ')
+                    .filter(|t| !t.is_empty())
+                    .map(str::to_owned),
+            );
+        }
+    }
+    out
+}
+
+#[test]
+fn plot_writes_a_well_formed_svg() {
+    let path = real("mag3_raw_541.csv");
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mag3.svg");
+    let _ = std::fs::remove_file(&out);
+    let out = out.display().to_string();
+    let r = magcal(&["fit", &path, "--plot", &out, "--format", "json"], None);
+    r.json();
+    let svg = std::fs::read_to_string(&out).expect("plot written");
+    assert!(svg.starts_with("<svg"), "{}", &svg[..60]);
+    assert!(svg.trim_end().ends_with("</svg>"));
+    assert_eq!(svg.matches("<g class=\"panel\"").count(), 4);
+    assert_eq!(svg.matches("<g").count(), svg.matches("</g>").count());
+    assert!(svg.contains("mag3_raw_541.csv") && svg.contains("adc2"));
+    let numbers = svg_coordinates(&svg);
+    assert!(numbers.len() > 4 * 541, "{}", numbers.len());
+    for n in &numbers {
+        let v: f64 = n.parse().unwrap_or_else(|_| panic!("coordinate {n:?}"));
+        assert!(v.is_finite(), "{n}");
+    }
+    // Deterministic: a second run writes the same bytes.
+    let again = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mag3_again.svg");
+    let again = again.display().to_string();
+    magcal(&["fit", &path, "--plot", &again], None);
+    assert_eq!(std::fs::read_to_string(&again).expect("written"), svg);
+
+    magcal(&["fit", &path, "--plot", "/nonexistent/dir/p.svg"], None).fails_with(
+        2,
+        "cannot write /nonexistent/dir/p.svg: No such file or directory",
+    );
+}
+
+#[test]
+fn bad_calibration_file_exits_2() {
+    let data = real("icm20948_mag_300.csv");
+    let cases: [(&str, &[u8], &str); 6] = [
+        ("empty.json", b"", "invalid JSON"),
+        ("text.json", b"hard iron 1 2 3", "invalid JSON"),
+        ("array.json", b"[1,2,3]", "expected the JSON object"),
+        (
+            "nob.json",
+            br#"{"soft_iron":[[1,0,0],[0,1,0],[0,0,1]]}"#,
+            "missing field 'hard_iron'",
+        ),
+        (
+            "short.json",
+            br#"{"hard_iron":[1,2,3],"soft_iron":[[1,0,0],[0,1,0]]}"#,
+            "'soft_iron' must be 3 rows of 3 numbers",
+        ),
+        (
+            "singular.json",
+            br#"{"hard_iron":[1,2,3],"soft_iron":[[1,0,0],[0,1,0],[0,0,0]]}"#,
+            "are not a calibration",
+        ),
+    ];
+    for (name, bytes, reason) in cases {
+        let cal = temp_file(name, bytes);
+        magcal(&["apply", &cal, &data], None).fails_with(2, reason);
+    }
+    magcal(&["apply", "/nonexistent/c.json", &data], None)
+        .fails_with(2, "cannot read /nonexistent/c.json");
+    magcal(&["apply", "-", "-"], None).fails_with(2, "cannot both be '-'");
+}
+
+#[test]
+fn hostile_apply_inputs_never_panic() {
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    let good = fitted(&real("icm20948_mag_300.csv"), &[], "hostile.cal.json");
+    let mut cals: Vec<Vec<u8>> = vec![
+        std::fs::read(&good).expect("cal"),
+        br#"{"hard_iron":[1e308,1e308,1e308],"soft_iron":[[1e-300,0,0],[0,1e-300,0],[0,0,1e-300]]}"#.to_vec(),
+        br#"{"hard_iron":[0,0,0],"soft_iron":[[1e200,0,0],[0,1e200,0],[0,0,1e200]]}"#.to_vec(),
+        br#"{"hard_iron":[0,0,0],"soft_iron":[[1,2,3],[4,5,6],[7,8,9]]}"#.to_vec(),
+        br#"{"hard_iron":[0,0,0],"soft_iron":[[-1,0,0],[0,1,0],[0,0,1]]}"#.to_vec(),
+        br#"{"hard_iron":[1e999,0,0],"soft_iron":[[1,0,0],[0,1,0],[0,0,1]]}"#.to_vec(),
+        b"{\"hard_iron\":[0,0,0],\"soft_iron\":[[1,0,0],[0,1,0],[0,0,1]]".to_vec(),
+    ];
+    cals.push(rng.bytes(300, &[]));
+    cals.push(rng.bytes(300, b"{}[],:\"0123456789.e-hard_ironsoft_"));
+    let mut data: Vec<Vec<u8>> = vec![
+        Vec::new(),
+        b"x,y,z,ax,ay,az\n".to_vec(),
+        b"x,y,z,ax,ay,az\n1,2,3,0,0,0\nnan,1,1,nan,0,9.8\n1,2,3,inf,0,1\n1e308,1e308,-1e308,1e308,1e308,1e308\n".to_vec(),
+        b"ax,ay,az\n1,2,3\n".to_vec(),
+        b"1,2,3\n4,5\n".to_vec(),
+        "1e300,1e300,1e300\n".repeat(20).into_bytes(),
+    ];
+    for _ in 0..3 {
+        data.push(rng.bytes(1500, &[]));
+        data.push(rng.bytes(1500, b"0123456789,,,\n\n.-enaix"));
+    }
+    for (i, cal) in cals.iter().enumerate() {
+        let cal_path = temp_file(&format!("hostile_cal_{i}.json"), cal);
+        for (j, bytes) in data.iter().enumerate() {
+            for extra in [&[][..], &["--scaled", "--window", "128"]] {
+                let r = magcal(
+                    &[&["apply", &cal_path, "-"][..], extra].concat(),
+                    Some(bytes),
+                );
+                assert!(
+                    matches!(r.code, 0 | 2),
+                    "cal {i} data {j}: exit {} {}",
+                    r.code,
+                    r.stderr
+                );
+                if r.code == 2 {
+                    assert_eq!(r.stderr.lines().count(), 1, "{i}/{j}: {:?}", r.stderr);
+                } else {
+                    assert!(r.stdout.starts_with("x,y,z"), "{i}/{j}");
+                    assert!(!r.stdout.contains("NaN") && !r.stdout.contains("inf"));
+                }
+            }
+        }
+    }
 }

@@ -34,7 +34,11 @@ impl<T: Real> Calibration<T> {
         {
             return Err(Error::OutOfRange);
         }
-        let w = sym_sqrt(&(soft_iron.transpose() * soft_iron))?;
+        // A singular W makes W^T W singular: say so in the user's terms.
+        let w = sym_sqrt(&(soft_iron.transpose() * soft_iron)).map_err(|e| match e {
+            Error::NotAnEllipsoid => Error::SingularSystem,
+            other => other,
+        })?;
         Self::from_canonical(hard_iron, w)
     }
 

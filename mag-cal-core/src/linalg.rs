@@ -35,7 +35,7 @@ where
 /// `V f(Lambda) V^T` for a symmetric positive definite 3x3 matrix, or
 /// `None`-like error when an eigenvalue is not strictly positive.
 fn sym_function<T: Real>(m: &Matrix3<T>, f: impl Fn(T) -> T) -> Result<Matrix3<T>, Error> {
-    let eig = sym_eigen(m.symmetrize_upper())?;
+    let eig = sym_eigen(m.symmetric_part())?;
     let max = eig.eigenvalues.amax();
     // A positive definite matrix whose smallest eigenvalue is lost in the
     // rounding of the largest is numerically singular.
@@ -49,7 +49,7 @@ fn sym_function<T: Real>(m: &Matrix3<T>, f: impl Fn(T) -> T) -> Result<Matrix3<T
     let v = &eig.eigenvectors;
     let d = Vector3::from_fn(|i, _| f(eig.eigenvalues[i]));
     // V D V^T is symmetric only to rounding; the canonical form is exactly so.
-    Ok((v * Matrix3::from_diagonal(&d) * v.transpose()).symmetrize_upper())
+    Ok((v * Matrix3::from_diagonal(&d) * v.transpose()).symmetric_part())
 }
 
 /// The symmetric positive definite square root `M^(1/2)`.
@@ -60,15 +60,4 @@ pub(crate) fn sym_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
 /// The symmetric positive definite inverse square root `M^(-1/2)`.
 pub(crate) fn sym_inv_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
     sym_function(m, |l| T::one() / l.sqrt())
-}
-
-/// The symmetric part `(A + A^T) / 2`.
-trait Symmetrize {
-    fn symmetrize_upper(&self) -> Self;
-}
-
-impl<T: Real> Symmetrize for Matrix3<T> {
-    fn symmetrize_upper(&self) -> Self {
-        (self + self.transpose()) * T::lit(0.5)
-    }
 }
