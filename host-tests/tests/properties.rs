@@ -1,5 +1,6 @@
 //! proptest properties of the core: exact recovery on noise-free data, and
-//! the invariances every calibration must have.
+//! the invariances every calibration must have, for every method (LS with
+//! each variant; ADC1, ADC2, iterated ADC2 and subMLE from LS9).
 
 use host_tests::sim::{make_samples_axes, sphere, Rng};
 use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
@@ -41,11 +42,16 @@ fn config(method: Method, ls: LsVariant) -> Config {
     }
 }
 
-const ALL: [(Method, LsVariant); 4] = [
+/// Every method: LS alone with each variant, the re-estimating methods from
+/// the default LS9 start.
+const ALL: [(Method, LsVariant); 7] = [
     (Method::Adc2, LsVariant::Ls9),
     (Method::Ls, LsVariant::Ls9),
     (Method::Ls, LsVariant::Svd10),
     (Method::Ls, LsVariant::LiGriffiths),
+    (Method::Adc1, LsVariant::Ls9),
+    (Method::SubMle, LsVariant::Ls9),
+    (Method::Adc2Iterated, LsVariant::Ls9),
 ];
 
 /// Li and Griffiths' constraint `4J - I^2 > 0` holds for `M`: only then can
@@ -64,7 +70,7 @@ fn m_err(fit: &Fit<f64>, m: &Matrix3<f64>) -> f64 {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    #![proptest_config(ProptestConfig::with_cases(256))]
 
     /// Noise-free samples: M = (T T^T)^-1 and b are recovered within 1e-6.
     #[test]
@@ -115,19 +121,37 @@ proptest! {
     /// Rotating the data, y -> Q y, maps b -> Q b and M -> Q M Q^T.
     /// Not for `Svd10`: its constraint `|v| = 1` counts the off-diagonal
     /// coefficients of the quadric once, so it is not `|A|_F` and not
-    /// rotation invariant; on noisy data it moves with the frame.
+    /// rotation invariant; on noisy data it moves with the frame (by about
+    /// 1e-3 relative here, and ADC2 from it by as much).
+    ///
+    /// The estimators are equivariant, but two solvers' paths are not:
+    /// subMLE's BFGS works on an upper-triangular `A` and iterated ADC2's
+    /// Anderson mixing on the packed upper entries of `W`, and neither
+    /// packing is rotation invariant. So the two fits of a rotated pair stop
+    /// at different points within their stop tests. Iterated ADC2 is run to
+    /// a tight pass tolerance (1e-11), where its fixed point is seen to be
+    /// equivariant to 1e-9. subMLE's stop (a step below 1e-6) is fixed; its
+    /// fits differ by up to about 1e-5 (8e-6 in 300 random cases), so it is
+    /// held to 1e-4: a real frame dependence, like Svd10's, is ten times
+    /// larger at this noise and would still fail.
     #[test]
     fn rotation_equivariance(t in distortion(), q in rotation(), seed in any::<u64>()) {
         let mut rng = Rng(seed);
         let y = make_samples_axes(&t, &Vector3::new(0.4, -0.1, 0.2), &sphere(300, &mut rng), [0.03; 3], &mut rng);
         let qy: Vec<[f64; 3]> = y.iter().map(|v| (q * Vector3::from(*v)).into()).collect();
         for (method, ls) in ALL.into_iter().filter(|(_, ls)| *ls != LsVariant::Svd10) {
-            let a = calibrate::<f64, _>(&y, &config(method, ls)).unwrap().calibration;
-            let c = calibrate::<f64, _>(&qy, &config(method, ls)).unwrap().calibration;
+            let cfg = Config {
+                pass_tolerance: Some(1e-11),
+                max_passes: 200,
+                ..config(method, ls)
+            };
+            let tol = if method == Method::SubMle { 1e-4 } else { 1e-9 };
+            let a = calibrate::<f64, _>(&y, &cfg).unwrap().calibration;
+            let c = calibrate::<f64, _>(&qy, &cfg).unwrap().calibration;
             let want_m = q * a.shape() * q.transpose();
-            prop_assert!((c.shape() - want_m).amax() < 1e-9 * want_m.amax(), "{method:?} {ls:?}");
-            prop_assert!((c.hard_iron() - q * a.hard_iron()).norm() < 1e-9 * a.field_strength());
-            prop_assert!((c.field_strength() - a.field_strength()).abs() < 1e-9 * a.field_strength());
+            prop_assert!((c.shape() - want_m).amax() < tol * want_m.amax(), "{method:?} {ls:?}");
+            prop_assert!((c.hard_iron() - q * a.hard_iron()).norm() < tol * a.field_strength());
+            prop_assert!((c.field_strength() - a.field_strength()).abs() < tol * a.field_strength());
         }
     }
 
