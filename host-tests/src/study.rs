@@ -480,7 +480,7 @@ pub struct Relation {
 }
 
 /// Identifiers of the relations [`relations`] returns, in order.
-pub const RELATION_IDS: [&str; 8] = [
+pub const RELATION_IDS: [&str; 9] = [
     "adc2_vs_ls9_each",
     "adc2_vs_ls9_mean_a_e",
     "iterated_vs_submle_each",
@@ -489,6 +489,7 @@ pub const RELATION_IDS: [&str; 8] = [
     "submle_cost",
     "h_adc2_vs_ls9",
     "h_smoothing",
+    "iterated_passes",
 ];
 
 /// How strictly the relations are checked.
@@ -633,6 +634,30 @@ pub fn relations(table: &[ScenarioStudy], h: &HeadingStudy, how: Strictness) -> 
         claim: format!("H: smoothing (window {SMOOTH_WINDOW}) lowers ADC2's heading error"),
         measured: format!("{smooth:.4} deg smoothed, {adc2:.4} deg unsmoothed"),
         pass: smooth < adc2,
+    });
+
+    // 9. Iterated ADC2's median passes: <= 8 on a full sphere, <= 25 on a
+    // +-30 deg band (plain iteration needs 16-22 and 70-90).
+    let p: Vec<(char, bool, u32)> = table
+        .iter()
+        .map(|s| {
+            let mut v = s.methods[idx(Method::Adc2Iterated)].passes.clone();
+            v.sort_unstable();
+            let median = v.get(v.len() / 2).copied().unwrap_or(u32::MAX);
+            (s.scenario.id, s.scenario.banded, median)
+        })
+        .collect();
+    out.push(Relation {
+        id: "iterated_passes",
+        claim: "iterated ADC2 median passes <= 8 on a full sphere, <= 25 on a +-30 deg band".into(),
+        measured: p
+            .iter()
+            .map(|(id, _, m)| format!("{id} {m}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        pass: p
+            .iter()
+            .all(|(_, banded, m)| *m <= if *banded { 25 } else { 8 }),
     });
     out
 }

@@ -141,6 +141,11 @@ fn smoothing_lowers_the_heading_error() {
 /// The core's smoother and alignment agree with the independent versions in
 /// `host_tests::metrics`, and every method sits at the noise floor in H.
 #[test]
+fn iterated_adc2_needs_few_passes() {
+    check("iterated_passes");
+}
+
+#[test]
 fn heading_pipeline_matches_the_independent_one() {
     let h = &study().heading;
     assert!(h.smoother_check < 1e-9, "smoother {:e}", h.smoother_check);
