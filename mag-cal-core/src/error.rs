@@ -43,6 +43,31 @@ pub enum Error {
     /// A given noise covariance is not finite, symmetric and positive
     /// definite.
     InvalidNoiseCovariance,
+    /// The samples lie near a plane (flat covariance): the third axis is not
+    /// observed. Turn the sensor through all orientations.
+    Planar,
+    /// More than one quadric fits the samples about equally well (e.g. two
+    /// great circles): the ellipsoid is not determined.
+    AmbiguousQuadric,
+    /// The fitted ellipsoid is too eccentric to be a magnetometer's
+    /// distortion (condition number of `M` above the limit).
+    ExtremeDistortion,
+    /// The calibrated directions cover too little of the sphere for the
+    /// estimate to be trusted (e.g. a spherical cap).
+    PoorCoverage,
+    /// The fitted field strength is too far from the expected one.
+    FieldStrengthMismatch,
+    /// Stored calibration bytes end early.
+    Truncated,
+    /// Stored calibration bytes do not start with the expected magic.
+    BadMagic,
+    /// Stored calibration bytes have a format version this build cannot read.
+    UnsupportedVersion {
+        /// Version found.
+        found: u8,
+    },
+    /// Stored calibration bytes fail their checksum.
+    ChecksumMismatch,
 }
 
 impl fmt::Display for Error {
@@ -70,6 +95,27 @@ impl fmt::Display for Error {
             Error::InvalidNoiseCovariance => {
                 f.write_str("noise covariance is not finite, symmetric and positive definite")
             }
+            Error::Planar => f.write_str(
+                "samples lie near a plane: turn the sensor through all orientations",
+            ),
+            Error::AmbiguousQuadric => f.write_str(
+                "several quadrics fit the samples about equally well: the ellipsoid is not determined",
+            ),
+            Error::ExtremeDistortion => {
+                f.write_str("fitted ellipsoid too eccentric for a magnetometer distortion")
+            }
+            Error::PoorCoverage => f.write_str(
+                "calibrated directions cover too little of the sphere: turn the sensor further",
+            ),
+            Error::FieldStrengthMismatch => {
+                f.write_str("fitted field strength too far from the expected value")
+            }
+            Error::Truncated => f.write_str("stored calibration is truncated"),
+            Error::BadMagic => f.write_str("stored bytes are not a calibration (bad magic)"),
+            Error::UnsupportedVersion { found } => {
+                write!(f, "stored calibration has unsupported format version {found}")
+            }
+            Error::ChecksumMismatch => f.write_str("stored calibration fails its checksum"),
         }
     }
 }

@@ -68,6 +68,7 @@
 pub mod align;
 pub mod artificial;
 pub mod calibration;
+pub mod collector;
 pub mod ellipsoid;
 mod error;
 pub mod heading;
@@ -75,6 +76,7 @@ mod linalg;
 pub mod methods;
 pub mod moments;
 pub mod normalize;
+pub mod persist;
 pub mod quality;
 pub mod quasi_newton;
 mod real;

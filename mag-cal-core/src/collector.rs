@@ -1,0 +1,1 @@
+//! Collecting samples one at a time on the device, with coverage.

@@ -1,0 +1,1 @@
+//! Storing a calibration as bytes: magic, version, parameters, CRC.
