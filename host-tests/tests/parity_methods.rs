@@ -105,7 +105,7 @@ fn iterated_adc2_reaches_the_plain_fixed_point() {
             ..Config::default()
         };
         let fit = calibrate::<f64, _>(&y, &cfg).unwrap();
-        assert!(fit.report.warnings.is_empty());
+        assert!(!fit.report.warnings.contains(mag_cal_core::Warning::PassCap));
         let (dm, db) = deviation(&fit, &plain);
         println!(
             "iterated {noise:?} band {banded}: dM {dm:.1e} db {db:.1e}; {} accelerated passes vs {plain_passes} plain (to 1e-12 / 1e-14)",

@@ -54,6 +54,18 @@ pub struct Quality {
     pub radial_rms: f64,
     /// Standard deviation over mean of `|W (y - b)|` over the samples used.
     pub norm_spread: f64,
+    /// Flatness of the samples (`lambda_min / lambda_max` of their
+    /// covariance; refused below 0.03).
+    pub flatness: f64,
+    /// Quadric gap of the LS scatter (refused below 3 on low-noise data).
+    pub quadric_gap: f64,
+    /// Condition number of `M` (refused above 16).
+    pub distortion: f64,
+    /// `lambda_min` of the covariance of the calibrated directions
+    /// (refused below 0.05; full sphere about 0.33).
+    pub coverage: f64,
+    /// Condition number of the directions' Gram matrix (warned above 20).
+    pub gram_condition: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
 }
@@ -158,6 +170,11 @@ fn fit_in<T: Real>(
         quality: Quality {
             radial_rms: fit.report.radial_rms.to_f64(),
             norm_spread: spread(norms),
+            flatness: fit.report.quality.flatness.to_f64(),
+            quadric_gap: fit.report.quality.quadric_gap.to_f64(),
+            distortion: fit.report.quality.distortion.to_f64(),
+            coverage: fit.report.quality.coverage.to_f64(),
+            gram_condition: fit.report.quality.gram_condition.to_f64(),
             warnings: fit.report.warnings.iter().map(|w| w.name()).collect(),
         },
     })

@@ -71,6 +71,12 @@ pub fn text(o: &Outcome, source_name: &str) -> String {
     } else {
         o.quality.warnings.join(", ")
     };
+    let q = &o.quality;
+    let _ = writeln!(
+        s,
+        "  geometry      flatness {:.3}, quadric gap {:.3e}, distortion {:.2}, coverage {:.3}, Gram condition {:.1}",
+        q.flatness, q.quadric_gap, q.distortion, q.coverage, q.gram_condition
+    );
     let _ = writeln!(s, "  warnings      {warnings}");
     let _ = writeln!(s);
     let _ = writeln!(
@@ -176,6 +182,11 @@ mod tests {
             quality: Quality {
                 radial_rms: 0.0123,
                 norm_spread: f64::NAN,
+                flatness: 0.4,
+                quadric_gap: 95.0,
+                distortion: 1.1,
+                coverage: 0.2,
+                gram_condition: 5.4,
                 warnings: vec!["pass_cap"],
             },
         }

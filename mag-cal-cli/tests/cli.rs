@@ -921,3 +921,47 @@ fn hostile_apply_inputs_never_panic() {
         }
     }
 }
+
+#[test]
+fn the_nearly_planar_recording_is_refused_naming_the_geometry() {
+    let planar = real("planar_243.txt");
+    magcal(&["fit", &planar], None).fails_with(3, "plane");
+    magcal(&["fit", &planar, "--method", "submle"], None).fails_with(3, "plane");
+}
+
+#[test]
+fn json_carries_the_geometry_figures_and_warnings() {
+    let v = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    )
+    .json();
+    let q = &v["quality"];
+    for key in [
+        "flatness",
+        "quadric_gap",
+        "distortion",
+        "coverage",
+        "gram_condition",
+    ] {
+        assert!(q[key].as_f64().is_some_and(f64::is_finite), "{key}: {q}");
+    }
+    assert!(q["coverage"].as_f64().unwrap() > 0.05);
+    assert!(q["warnings"].is_array());
+    // Too few samples for comfort: a warning, not a refusal.
+    let few: String = read_xyz(&real("icm20948_mag_300.csv"))
+        .iter()
+        .step_by(8)
+        .map(|v| format!("{},{},{}\n", v[0], v[1], v[2]))
+        .collect();
+    let path = temp_file("few.csv", few.as_bytes());
+    let v = magcal(&["fit", &path, "--format", "json"], None).json();
+    assert!(
+        v["quality"]["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w == "few_samples"),
+        "{v}"
+    );
+}

@@ -57,14 +57,21 @@ pub struct Ellipsoid<T: Real> {
 
 /// Fits an ellipsoid to the moments with the chosen variant.
 pub fn fit<T: Real>(moments: &Moments<T>, variant: LsVariant) -> Result<Ellipsoid<T>, Error> {
-    let s = moments.scatter();
+    fit_scatter(&moments.scatter(), variant)
+}
+
+/// Fits an ellipsoid to the 10x10 scatter with the chosen variant.
+pub fn fit_scatter<T: Real>(
+    s: &SMatrix<T, 10, 10>,
+    variant: LsVariant,
+) -> Result<Ellipsoid<T>, Error> {
     if !s.iter().all(|v| v.is_finite()) {
         return Err(Error::OutOfRange);
     }
     let v = match variant {
-        LsVariant::Ls9 => ls9(&s)?,
-        LsVariant::Svd10 => svd10(&s)?,
-        LsVariant::LiGriffiths => li_griffiths(&s)?,
+        LsVariant::Ls9 => ls9(s)?,
+        LsVariant::Svd10 => svd10(s)?,
+        LsVariant::LiGriffiths => li_griffiths(s)?,
     };
     from_quadric(&v)
 }

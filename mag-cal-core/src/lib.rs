@@ -93,7 +93,7 @@ pub use error::Error;
 pub use methods::Method;
 pub use nalgebra;
 pub use normalize::MIN_SAMPLES;
-pub use quality::{Warning, Warnings};
+pub use quality::{Quality, Warning, Warnings};
 pub use real::Real;
 pub use sample::{Sample, SampleStore};
 
@@ -118,9 +118,16 @@ pub struct Config {
     /// `f64` and `1e-5` in `f32`.
     pub pass_tolerance: Option<f64>,
     /// Per-sample noise covariance `Sigma`, sensor units squared, for
-    /// [`Method::Adc1`]; when `None`, it is estimated from the LS residuals
-    /// (the paper's procedure).
+    /// [`Method::Adc1`] (when `None`, it is estimated from the LS residuals,
+    /// the paper's procedure) and for the spread check
+    /// ([`Warning::LowSpread`]).
     pub noise_covariance: Option<[[f64; 3]; 3]>,
+    /// The local field strength the calibration should find, sensor units,
+    /// when known (e.g. from a geomagnetic model): a fit whose
+    /// `field_strength` is off by more than 25 % is refused
+    /// ([`Error::FieldStrengthMismatch`]). It is the only check that catches
+    /// a small cap of directions fitted by a too-small sphere.
+    pub expected_field_strength: Option<f64>,
 }
 
 impl Default for Config {
@@ -132,6 +139,7 @@ impl Default for Config {
             max_passes: 50,
             pass_tolerance: None,
             noise_covariance: None,
+            expected_field_strength: None,
         }
     }
 }
@@ -155,6 +163,8 @@ pub struct Report<T: Real> {
     pub samples_dropped: usize,
     /// RMS of `|W (y - b)| - 1` over the samples used.
     pub radial_rms: T,
+    /// The figures behind the degenerate-geometry checks.
+    pub quality: Quality<T>,
     /// What the caller should know but that did not refuse the fit.
     pub warnings: Warnings,
 }
@@ -171,13 +181,41 @@ pub struct Fit<T: Real> {
 /// Calibrates from a slice of raw samples, in precision `T`.
 ///
 /// Non-finite samples are skipped and counted. Passes over the data:
-/// validation and normalisation, moments, then (ADC2) artificial data, and
-/// finally the radial RMS for the report.
+/// validation and normalisation, moments, then (except [`Method::Ls`]) the
+/// method's own passes, and finally one pass for the quality figures. The
+/// degenerate-geometry checks ([`quality`]) refuse planar, ambiguous,
+/// too eccentric or poorly covered data with a specific [`Error`], and
+/// report milder findings as [`Warning`]s.
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples)?;
     let norm = scan.norm;
+    let mut warnings = Warnings::NONE;
+    if scan.dropped > 0 {
+        warnings.insert(Warning::NonFiniteDropped);
+    }
+    if scan.used < quality::WARN_SAMPLES {
+        warnings.insert(Warning::FewSamples);
+    }
+    if let Some(c) = config.noise_covariance {
+        let sigma = libm::sqrt((c[0][0] + c[1][1] + c[2][2]) / 3.0);
+        if norm.scale.to_f64() < quality::WARN_SPREAD_OVER_NOISE * sigma {
+            warnings.insert(Warning::LowSpread);
+        }
+    }
+
     let moments = moments::Moments::accumulate(samples, &norm);
-    let ls = ellipsoid::fit(&moments, config.ls)?;
+    let flatness = quality::flatness(&moments, scan.used)?;
+    if !(flatness.to_f64() >= quality::REFUSE_FLATNESS) {
+        return Err(Error::Planar);
+    }
+    if flatness.to_f64() < quality::WARN_FLATNESS {
+        warnings.insert(Warning::NearlyPlanar);
+    }
+    let scatter = moments.scatter();
+    // Judged after the fit, against its radial RMS (see REFUSE_QUADRIC_GAP).
+    let quadric_gap = quality::quadric_gap(&scatter)?;
+
+    let ls = ellipsoid::fit_scatter(&scatter, config.ls)?;
     let est = match config.method {
         Method::Ls => methods::Estimate::from_ellipsoid(&ls),
         Method::Adc1 => methods::adc1::run(samples, &norm, &ls, config)?,
@@ -185,9 +223,35 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
         Method::Adc2Iterated => methods::iterated::run(samples, &norm, &ls, config)?,
         Method::SubMle => methods::submle::run(samples, &norm, &ls, config)?,
     };
-    let (centre, w) = (est.centre, est.w);
-    let calibration = Calibration::from_normalised_w(&norm, &w, &centre)?;
-    let radial_rms = quality::radial_rms(samples, &norm, &centre, &w);
+    for w in est.warnings.iter() {
+        warnings.insert(w);
+    }
+    let distortion = quality::distortion(&est.w)?;
+    if !(distortion.to_f64() <= quality::REFUSE_DISTORTION) {
+        return Err(Error::ExtremeDistortion);
+    }
+    let calibration = Calibration::from_normalised_w(&norm, &est.w, &est.centre)?;
+    let last = quality::final_pass(samples, &norm, &est.centre, &est.w)?;
+    if !(quadric_gap.to_f64() >= quality::REFUSE_QUADRIC_GAP)
+        && !(last.radial_rms.to_f64() >= quality::GAP_NOISE_LIMIT)
+    {
+        return Err(Error::AmbiguousQuadric);
+    }
+    if !(quadric_gap.to_f64() >= quality::WARN_QUADRIC_GAP) {
+        warnings.insert(Warning::WeakQuadric);
+    }
+    if !(last.coverage.to_f64() >= quality::REFUSE_COVERAGE) {
+        return Err(Error::PoorCoverage);
+    }
+    if !(last.gram_condition.to_f64() <= quality::WARN_GRAM_CONDITION) {
+        warnings.insert(Warning::WeakCoverage);
+    }
+    if let Some(expected) = config.expected_field_strength {
+        let deviation = calibration.field_strength().to_f64() / expected - 1.0;
+        if !(libm::fabs(deviation) <= quality::REFUSE_FIELD_DEVIATION) {
+            return Err(Error::FieldStrengthMismatch);
+        }
+    }
     Ok(Fit {
         calibration,
         report: Report {
@@ -197,8 +261,15 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
             passes: est.passes,
             samples_used: scan.used,
             samples_dropped: scan.dropped,
-            radial_rms,
-            warnings: est.warnings,
+            radial_rms: last.radial_rms,
+            quality: Quality {
+                flatness,
+                quadric_gap,
+                distortion,
+                coverage: last.coverage,
+                gram_condition: last.gram_condition,
+            },
+            warnings,
         },
     })
 }
