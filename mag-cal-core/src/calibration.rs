@@ -43,7 +43,7 @@ impl<T: Real> Calibration<T> {
     }
 
     /// From a symmetric positive definite `W` already in canonical form.
-    fn from_canonical(hard_iron: Vector3<T>, w: Matrix3<T>) -> Result<Self, Error> {
+    pub(crate) fn from_canonical(hard_iron: Vector3<T>, w: Matrix3<T>) -> Result<Self, Error> {
         let det = w.determinant();
         if !(det > T::zero()) || !det.is_finite() {
             return Err(Error::SingularSystem);

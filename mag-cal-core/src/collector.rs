@@ -1,1 +1,713 @@
 //! Collecting samples one at a time on the device, with coverage.
+//!
+//! A [`Collector`] stores up to `N` raw samples inline (no heap) and decides
+//! for each new reading, in constant time, whether it is worth keeping. It
+//! tracks which part of the sphere of field directions the kept samples
+//! cover and says when that is enough to calibrate ([`Progress::ready`]).
+//! It is a gate in front of [`crate::calibrate`], not a calibration: its
+//! estimates only need to be good enough to sort samples into cells about
+//! 30 deg across. Everything runs in `f32`.
+//!
+//! # Work per sample
+//!
+//! [`Collector::offer`] costs the same for the first and the ten-thousandth
+//! sample, whatever `N`: a fixed update of running sums (about 40 flops),
+//! one 3x3 solve by cofactors (about 50 flops, one division), two
+//! normalisations (two square roots), and the re-classification of
+//! [`RESCAN_PER_OFFER`] = 4 stored samples in round robin (about 15 flops
+//! each, no square root). There is no loop over the stored samples.
+//! [`Collector::progress`] re-examines at most [`CELLS`] samples, one per
+//! cell.
+//!
+//! # Numerical choices
+//!
+//! **Running centre.** Directions are taken from a running estimate `c` of
+//! the hard iron. The mean of the samples is no such estimate: it follows
+//! the user's dwell time and sits inside whatever part of the sphere has
+//! been visited. The midrange (per axis `(min + max) / 2`) ignores dwell
+//! time and is exact once the six axis extremes of the ellipsoid are seen,
+//! but on partial coverage it is as biased as the mean: for a polar cap of
+//! a sixth of the sphere both put the centre 0.83 `rho` up the axis, so the
+//! cap's rim is seen 12 deg *below* the equator and the cap appears to
+//! cover two thirds of the 48 cells (the failure the firmware's first
+//! coverage figure avoided by an O(n) ellipsoid fit per check). The
+//! collector uses instead Kasa's algebraic sphere fit, which is O(1) per
+//! sample: minimise `sum (|y|^2 - a.y - d)^2`; the centre `a / 2` solves
+//! the 3x3 system `C a = g`, with `C` the covariance of the samples and `g`
+//! their covariance with `|y|^2`. Both are updated per sample by Welford's
+//! recurrences on `y - y_0` (`y_0` the first sample kept), which do not
+//! cancel catastrophically in `f32` as raw power sums would. The fit is
+//! exact for samples on a sphere, whatever part of it they cover, and by
+//! symmetry exact for any centrally symmetric coverage of an ellipsoid (the
+//! full sphere, a band). On a cap of a distorted ellipsoid it is biased by
+//! the distortion, not by the cap's height (see the table below).
+//!
+//! Where the samples do not determine the centre (the first few samples,
+//! or a plane, whose normal component of `C` is only noise), the solve is
+//! regularised towards the midrange `m`: `(C + mu I) a = g + 2 mu m` with
+//! `mu = 0.001 trace(C) / 3`. Along well-observed directions (eigenvalues
+//! of `C` far above `mu`) this is the sphere fit, pulled towards the
+//! midrange by the fraction `mu / (lambda + mu)` (1 % for a cap of a sixth
+//! of the sphere); along unobserved ones it is the midrange. The matrix is
+//! symmetric positive definite with condition number at most
+//! `1 + 3 / 0.001 = 3001`, so the cofactor solve in `f32` is accurate to
+//! about `3001 * 2^-24 = 2e-4` relative, plenty for a gate, and no case
+//! distinction is needed.
+//!
+//! **Near-duplicates.** A sample is kept only if its direction from the
+//! current centre differs by at least the minimum angle from that of the
+//! last sample kept (measured from the same centre). The test compares the
+//! chord `|u - v|` of the two unit vectors with `2 sin(angle / 2)`: unlike
+//! `u . v` against `cos(angle)` it does not cancel for small angles. A
+//! direction must differ by a strictly positive angle, so an exact repeat is
+//! refused even with a minimum angle of zero. The default,
+//! [`DEFAULT_MIN_ANGLE_DEG`] = 4 deg, is about 10 standard deviations of the
+//! angular noise of a typical MEMS magnetometer (1-3 counts of noise on a
+//! field of 300-500 counts: 0.2-0.5 deg), so a device held still adds no
+//! samples, while a cell (about 30 deg across) still gets about 7 samples
+//! on every pass. Slow motion is kept too, one sample per 4 deg turned.
+//!
+//! **Cells.** The sphere is cut into [`BANDS`] = 6 zones of equal height in
+//! `z` and [`SECTORS`] = 8 sectors of 45 deg in longitude: [`CELLS`] = 48
+//! cells. By Archimedes' theorem (Lambert's cylindrical projection
+//! preserves area) a zone's area is proportional to its height, so all
+//! cells have the same area, `4 pi / 48` sr (about 29 deg across). The band
+//! is `floor(3 (z / r + 1))`, found by comparing `9 z^2` with `r^2` and
+//! `4 r^2`; the sector comes from the signs of `x`, `y` and the comparison
+//! of `|x|` with `|y|`: no square root, no `atan2`. The cells live in the
+//! sensor frame around the current centre, so on a distorted sensor they
+//! are equal-area up to the soft iron (a few tens of percent).
+//!
+//! **Moving centre.** A sample's cell depends on the centre, which moves
+//! while samples arrive, so classifications made early may be off. Each
+//! cell remembers one sample, its *witness*: the latest one classified into
+//! it, either when kept or when the round robin of [`Collector::offer`]
+//! re-classifies it against the then current centre (at 4 samples a call
+//! the round robin laps a store growing by one sample a call within
+//! `len / 3` calls). [`Collector::progress`] re-classifies the at most 48
+//! witnesses against the current centre and counts the distinct cells they
+//! fall in. The count is therefore never more than the number of cells
+//! holding a stored sample as seen from the current centre (it is never
+//! optimistic); it may be a few cells short while the centre still moves,
+//! and it can go down.
+//!
+//! **Ready.** [`Progress::ready`] needs [`READY_CELLS`] = 36 of the 48
+//! cells (75 %) and [`READY_SAMPLES`] = 100 samples (or the capacity, if
+//! smaller). The core refuses a fit whose calibrated directions have
+//! `lambda_min(cov(h)) < 0.05`: a full sphere has 0.31 to 0.33, a band of
+//! elevation `+-a` has `sin(a)^2 / 3`, which is 0.085 at +-30 deg and 0.05
+//! at +-23 deg. With six equal-height bands every band from +-19.5 deg to
+//! +-41.8 deg touches the same 32 cells (67 %), so a threshold of 60-70 %
+//! would call a +-20 deg band ready, which the core refuses; 36 cells
+//! needs samples towards both poles. 100 samples is ten times the fit's
+//! minimum ([`crate::MIN_SAMPLES`]) and twice the count below which the
+//! design has the fit warn; with 36 cells it is about 3 samples a cell.
+//! Collecting on after `ready` only improves the calibration.
+//!
+//! Measured (firmware-like sensor: `rho` = 320 counts, noise 2.5 counts,
+//! `i16`, hard iron (180, -95, 240); soft iron `V diag(0.8, 1, 1.25) V^T`
+//! or none; spiral motion, 900 offers, cells visited at the end):
+//!
+//! | field directions | cells, no soft iron | cells, soft iron | ready | with the midrange instead | core fit |
+//! |---|---|---|---|---|---|
+//! | full sphere | 48 | 47 | yes | 48 | ok |
+//! | band +-45 deg | 48 | 44 | yes | 41-45 | ok |
+//! | band +-30 deg | 32 | 31 | no | 31-32 | ok |
+//! | band +-20 deg | 30 | 26 | no | 24-26 | refused |
+//! | cap 65 % (z > -0.3) | 32 | 36 | no / yes | 40, ready | ok |
+//! | hemisphere | 29 | 28 | no | 39-40, ready | ok |
+//! | cap 35 % (z > 0.3) | 24 | 20 | no | 37-38, ready | refused |
+//! | cap 17 % (z > 2/3) | 16 | 13 | no | 31-32 | refused |
+//! | level turn (planar) | 16 | 11 | no | 10-16 | refused |
+//! | tilted great circle | 19 | 18 | no | 20 | refused |
+//!
+//! Wherever the collector says ready, the core accepts the fit; it is
+//! conservative the other way (a +-30 deg band or a hemisphere still
+//! calibrate, with 1.2-11 times the hard-iron error of the full sphere).
+//! With the midrange, caps the core refuses would read ready. The firmware
+//! example's motion (a pole-to-pole spiral of 600 samples 8 deg apart)
+//! becomes ready after 380-410 samples.
+//!
+//! ```
+//! use mag_cal_core::collector::{Collector, Offer};
+//!
+//! // 6 bytes a sample: 600 samples in 3.6 kB.
+//! let mut collector: Collector<[i16; 3], 600> = Collector::default();
+//! assert_eq!(collector.offer([120, -40, 300]), Offer::Accepted);
+//! assert_eq!(collector.offer([120, -40, 300]), Offer::TooClose);
+//! let p = collector.progress();
+//! assert_eq!((p.samples, p.ready), (1, false));
+//! ```
+
+use crate::sample::Sample;
+
+/// Default minimum angle between consecutive kept samples, degrees (see the
+/// module documentation for the choice).
+pub const DEFAULT_MIN_ANGLE_DEG: f32 = 4.0;
+
+/// Equal-height zones of the sphere (in `z`).
+pub const BANDS: usize = 6;
+
+/// Longitude sectors of each zone (45 deg each).
+pub const SECTORS: usize = 8;
+
+/// Equal-area direction cells: [`BANDS`] x [`SECTORS`].
+pub const CELLS: usize = BANDS * SECTORS;
+
+/// Cells that must hold a sample before the collector is ready (75 %).
+pub const READY_CELLS: usize = 36;
+
+/// Samples needed before the collector is ready (or the capacity, if
+/// smaller).
+pub const READY_SAMPLES: usize = 100;
+
+/// Weight `delta` of the midrange prior in the centre solve: `mu = delta
+/// trace(C) / 3`.
+const PRIOR_WEIGHT: f32 = 0.001;
+
+/// Stored samples re-classified per call of [`Collector::offer`]: more
+/// than one, so that the round robin laps a store that grows by one sample
+/// a call: at 4 it revisits every sample within about `len / 3` calls.
+pub const RESCAN_PER_OFFER: usize = 4;
+
+/// No witness for a cell yet.
+const NO_WITNESS: usize = usize::MAX;
+
+/// What [`Collector::offer`] did with a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Offer {
+    /// The sample was stored.
+    Accepted,
+    /// Refused: its direction from the running centre is within the minimum
+    /// angle of the last stored sample's (this includes an exact repeat, and
+    /// a sample with no direction because it sits on the centre estimate).
+    TooClose,
+    /// Refused: a component is NaN or infinite in `f32` (including `f64` or
+    /// `i32` values beyond `f32`'s range), or the sample is so far from the
+    /// first one (beyond about `1e12` units) that the running sums would
+    /// overflow `f32`.
+    NotFinite,
+    /// Refused: the collector holds `N` samples already.
+    Full,
+}
+
+/// How far the collection is, as reported by [`Collector::progress`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Progress {
+    /// Samples stored.
+    pub samples: usize,
+    /// Direction cells holding a stored sample, as seen from the current
+    /// centre estimate (a lower bound, see the module documentation).
+    pub cells_visited: usize,
+    /// Number of cells, [`CELLS`].
+    pub cells: usize,
+    /// Progress towards [`Progress::ready`], `0..=100`: the smaller of the
+    /// cell fraction `cells_visited / READY_CELLS` and the sample fraction
+    /// `samples / min(READY_SAMPLES, N)`, rounded down. It is 100 exactly
+    /// when `ready`.
+    pub percent: u8,
+    /// Coverage and count are enough to calibrate.
+    pub ready: bool,
+}
+
+/// Running sums of the centre estimate, in `f32`, on `x = y - origin`.
+#[derive(Clone, Copy, Debug)]
+struct CentreFit {
+    /// The first sample kept.
+    origin: [f32; 3],
+    /// Samples in the sums.
+    n: f32,
+    /// Mean of `x`.
+    mean: [f32; 3],
+    /// Mean of `q = |x|^2`.
+    mean_q: f32,
+    /// Covariance of `x` (population): `xx, xy, xz, yy, yz, zz`.
+    cov: [f32; 6],
+    /// Covariance of `x` with `q`.
+    cov_q: [f32; 3],
+    /// Per-axis minimum of `x`.
+    lo: [f32; 3],
+    /// Per-axis maximum of `x`.
+    hi: [f32; 3],
+}
+
+impl CentreFit {
+    const EMPTY: CentreFit = CentreFit {
+        origin: [0.0; 3],
+        n: 0.0,
+        mean: [0.0; 3],
+        mean_q: 0.0,
+        cov: [0.0; 6],
+        cov_q: [0.0; 3],
+        lo: [0.0; 3],
+        hi: [0.0; 3],
+    };
+
+    /// The sums with `y` added, or `None` when they would not be finite.
+    fn with(&self, y: [f32; 3]) -> Option<CentreFit> {
+        let mut f = *self;
+        if f.n == 0.0 {
+            f.origin = y;
+        }
+        let x = sub(y, f.origin);
+        let q = dot(x, x);
+        f.n += 1.0;
+        let w = 1.0 / f.n;
+        let dx = sub(x, f.mean);
+        let dq = q - f.mean_q;
+        for k in 0..3 {
+            f.mean[k] += dx[k] * w;
+            f.lo[k] = f.lo[k].min(x[k]);
+            f.hi[k] = f.hi[k].max(x[k]);
+        }
+        f.mean_q += dq * w;
+        // Welford, population form: C_n = C_{n-1} + (dx dx^T (n-1)/n - C_{n-1}) / n
+        // with dx = x - mean_{n-1}; symmetric by construction.
+        let v = 1.0 - w;
+        let outer = [
+            dx[0] * dx[0],
+            dx[0] * dx[1],
+            dx[0] * dx[2],
+            dx[1] * dx[1],
+            dx[1] * dx[2],
+            dx[2] * dx[2],
+        ];
+        for (c, o) in f.cov.iter_mut().zip(outer) {
+            *c += (o * v - *c) * w;
+        }
+        for (c, d) in f.cov_q.iter_mut().zip(dx) {
+            *c += (d * dq * v - *c) * w;
+        }
+        let finite = f
+            .mean
+            .iter()
+            .chain(&f.cov)
+            .chain(&f.cov_q)
+            .chain(&f.lo)
+            .chain(&f.hi)
+            .chain(core::iter::once(&f.mean_q))
+            .all(|v| v.is_finite());
+        finite.then_some(f)
+    }
+
+    /// The centre estimate, sensor units.
+    fn centre(&self) -> [f32; 3] {
+        let mid = [
+            0.5 * (self.lo[0] + self.hi[0]),
+            0.5 * (self.lo[1] + self.hi[1]),
+            0.5 * (self.lo[2] + self.hi[2]),
+        ];
+        let [xx, xy, xz, yy, yz, zz] = self.cov;
+        let trace = xx + yy + zz;
+        let fallback = add(self.origin, mid);
+        if !(trace > 0.0) || !trace.is_finite() {
+            return fallback;
+        }
+        // (C + mu I) a = g + mu 2 m, divided by trace(C) so that the matrix
+        // has entries of order one (its determinant cannot overflow).
+        let s = 1.0 / trace;
+        let mu = PRIOR_WEIGHT / 3.0;
+        let (a11, a12, a13) = (xx * s + mu, xy * s, xz * s);
+        let (a22, a23, a33) = (yy * s + mu, yz * s, zz * s + mu);
+        let rhs = [
+            self.cov_q[0] * s + 2.0 * mu * mid[0],
+            self.cov_q[1] * s + 2.0 * mu * mid[1],
+            self.cov_q[2] * s + 2.0 * mu * mid[2],
+        ];
+        // Cofactors of the symmetric matrix.
+        let c11 = a22 * a33 - a23 * a23;
+        let c12 = a13 * a23 - a12 * a33;
+        let c13 = a12 * a23 - a13 * a22;
+        let c22 = a11 * a33 - a13 * a13;
+        let c23 = a12 * a13 - a11 * a23;
+        let c33 = a11 * a22 - a12 * a12;
+        let det = a11 * c11 + a12 * c12 + a13 * c13;
+        if !(det > 0.0) {
+            return fallback;
+        }
+        let h = 0.5 / det;
+        let centre = [
+            self.origin[0] + h * (c11 * rhs[0] + c12 * rhs[1] + c13 * rhs[2]),
+            self.origin[1] + h * (c12 * rhs[0] + c22 * rhs[1] + c23 * rhs[2]),
+            self.origin[2] + h * (c13 * rhs[0] + c23 * rhs[1] + c33 * rhs[2]),
+        ];
+        if centre.iter().all(|v| v.is_finite()) {
+            centre
+        } else {
+            fallback
+        }
+    }
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Unit direction of `y` from `centre`, or `None` when `y` is on the centre
+/// (or the distance overflows).
+fn direction(y: [f32; 3], centre: [f32; 3]) -> Option<[f32; 3]> {
+    let v = sub(y, centre);
+    let r = libm::sqrtf(dot(v, v));
+    if !(r > 0.0) || !r.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / r;
+    Some([v[0] * inv, v[1] * inv, v[2] * inv])
+}
+
+/// The equal-area cell of the direction of `v` (any length), or `None` when
+/// `v` is zero or not finite. Band `floor(3 (z / |v| + 1))`, decided by
+/// comparing `9 z^2` with `|v|^2` and `4 |v|^2` (no square root); sector by
+/// octant of longitude from signs and `|x|` against `|y|` (no `atan2`).
+fn cell(v: [f32; 3]) -> Option<usize> {
+    let [x, y, z] = v;
+    let r2 = dot(v, v);
+    if !(r2 > 0.0) || !r2.is_finite() {
+        return None;
+    }
+    let q = 9.0 * z * z;
+    // |z| / |v| >= 2/3, >= 1/3, or below.
+    let k = if q >= 4.0 * r2 {
+        2
+    } else if q >= r2 {
+        1
+    } else {
+        0
+    };
+    let band = if z >= 0.0 { 3 + k } else { 2 - k };
+    let (ax, ay) = (x.abs(), y.abs());
+    let sector = match (x >= 0.0, y >= 0.0) {
+        (true, true) => usize::from(ay >= ax),       // 0..90 deg
+        (false, true) => 2 + usize::from(ax >= ay),  // 90..180
+        (false, false) => 4 + usize::from(ay >= ax), // 180..270
+        (true, false) => 6 + usize::from(ax >= ay),  // 270..360
+    };
+    Some(band * SECTORS + sector)
+}
+
+/// A fixed-capacity sample collector with near-duplicate rejection and
+/// coverage tracking (see the [module documentation](self) for the
+/// numerics).
+///
+/// Capacity is the const generic `N`, stored inline: `N * size_of::<S>()`
+/// bytes plus about 320 bytes of state on a 32-bit target. With
+/// `S = [i16; 3]` a sample takes 6 bytes. Every method is bounded:
+/// [`Collector::offer`] is O(1) and [`Collector::progress`] O([`CELLS`]),
+/// independent of `N`.
+///
+/// Gross outliers (a glitched reading far off the ellipsoid) are not
+/// detected: like every least-squares estimate, the running centre follows
+/// them until [`Collector::clear`]. [`crate::calibrate`] judges the stored
+/// samples on its own.
+///
+/// ```
+/// use mag_cal_core::collector::{Collector, Offer};
+/// use mag_cal_core::{calibrate, Config};
+///
+/// let mut collector: Collector<[f32; 3], 1000> = Collector::new(4.0);
+/// // The device turning in all directions: the field direction follows a
+/// // spiral, the raw readings an offset, scaled sphere.
+/// let mut k = 0;
+/// while !collector.is_ready() && k < 800 {
+///     let z = 1.0 - 2.0 * k as f32 / 800.0;
+///     let r = (1.0 - z * z).sqrt();
+///     let phi = k as f32 * 0.3;
+///     let raw = [250.0 + 300.0 * r * phi.cos(), -80.0 + 330.0 * r * phi.sin(), 40.0 + 280.0 * z];
+///     let _ = collector.offer(raw);
+///     k += 1;
+/// }
+/// let p = collector.progress();
+/// assert!(p.ready && p.percent == 100 && p.cells_visited >= 36);
+/// let fit = calibrate::<f32, _>(collector.samples(), &Config::default())?;
+/// assert!((fit.calibration.hard_iron().x - 250.0).abs() < 1.0);
+/// # Ok::<(), mag_cal_core::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Collector<S: Sample, const N: usize> {
+    samples: heapless::Vec<S, N>,
+    /// Squared minimum chord between unit directions, `(2 sin(angle/2))^2`.
+    min_chord_sq: f32,
+    fit: CentreFit,
+    /// Centre estimate over the stored samples.
+    centre: [f32; 3],
+    /// Per cell, the index of the latest sample classified into it (when
+    /// stored or re-classified), or [`NO_WITNESS`].
+    witness: [usize; CELLS],
+    /// Next stored sample to re-classify.
+    cursor: usize,
+}
+
+impl<S: Sample, const N: usize> Default for Collector<S, N> {
+    /// A collector with the [`DEFAULT_MIN_ANGLE_DEG`] spacing.
+    fn default() -> Self {
+        Self::new(DEFAULT_MIN_ANGLE_DEG)
+    }
+}
+
+impl<S: Sample, const N: usize> Collector<S, N> {
+    /// An empty collector keeping samples at least `min_angle_deg` apart in
+    /// direction ([`DEFAULT_MIN_ANGLE_DEG`] = 4 deg is a good choice, and
+    /// what [`Default`] uses). The angle is clamped to `[0, 180]`; NaN is
+    /// taken as the default. Exact repeats are refused even at 0.
+    ///
+    /// ```
+    /// use mag_cal_core::collector::Collector;
+    /// let c: Collector<[i16; 3], 500> = Collector::new(5.0);
+    /// assert_eq!((c.len(), c.capacity()), (0, 500));
+    /// ```
+    pub fn new(min_angle_deg: f32) -> Self {
+        let deg = if min_angle_deg.is_nan() {
+            DEFAULT_MIN_ANGLE_DEG
+        } else {
+            min_angle_deg.clamp(0.0, 180.0)
+        };
+        let chord = 2.0 * libm::sinf(deg * (core::f32::consts::PI / 360.0));
+        Self {
+            samples: heapless::Vec::new(),
+            min_chord_sq: chord * chord,
+            fit: CentreFit::EMPTY,
+            centre: [0.0; 3],
+            witness: [NO_WITNESS; CELLS],
+            cursor: 0,
+        }
+    }
+
+    /// Offers one sample: stores it and returns [`Offer::Accepted`], or says
+    /// why not. The checks, in order: [`Offer::Full`],
+    /// [`Offer::NotFinite`], [`Offer::TooClose`].
+    ///
+    /// Constant time: the running sums are updated, the centre re-solved
+    /// (3x3), the direction compared with the last stored sample's only,
+    /// and [`RESCAN_PER_OFFER`] stored samples re-classified (every call,
+    /// whatever the outcome, so offering on after [`Offer::Full`] still
+    /// refreshes the coverage). A refused sample is neither stored nor
+    /// counted in the centre.
+    ///
+    /// ```
+    /// use mag_cal_core::collector::{Collector, Offer};
+    /// let mut c: Collector<[f32; 3], 2> = Collector::default();
+    /// assert_eq!(c.offer([f32::NAN, 0.0, 0.0]), Offer::NotFinite);
+    /// assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted);
+    /// assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::TooClose);
+    /// assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted);
+    /// assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::Full);
+    /// ```
+    pub fn offer(&mut self, sample: S) -> Offer {
+        let outcome = self.offer_inner(sample);
+        self.rescan();
+        outcome
+    }
+
+    /// [`Collector::offer`] without the re-classification step.
+    fn offer_inner(&mut self, sample: S) -> Offer {
+        if self.samples.is_full() {
+            return Offer::Full;
+        }
+        let y = sample.xyz::<f32>();
+        if !y.iter().all(|v| v.is_finite()) {
+            return Offer::NotFinite;
+        }
+        let Some(fit) = self.fit.with(y) else {
+            return Offer::NotFinite;
+        };
+        let centre = fit.centre();
+        let new_dir = direction(y, centre);
+        let last_dir = self
+            .samples
+            .last()
+            .and_then(|s| direction(s.xyz::<f32>(), centre));
+        let accept = match (new_dir, last_dir) {
+            (None, _) => false,
+            (Some(_), None) => true,
+            (Some(u), Some(v)) => {
+                let d = sub(u, v);
+                let chord_sq = dot(d, d);
+                chord_sq > 0.0 && chord_sq >= self.min_chord_sq
+            }
+        };
+        if !accept && !self.samples.is_empty() {
+            return Offer::TooClose;
+        }
+        let index = self.samples.len();
+        if self.samples.push(sample).is_err() {
+            return Offer::Full;
+        }
+        self.fit = fit;
+        self.centre = centre;
+        if let Some(w) = cell(sub(y, centre)).and_then(|c| self.witness.get_mut(c)) {
+            *w = index;
+        }
+        Offer::Accepted
+    }
+
+    /// Re-classifies the next [`RESCAN_PER_OFFER`] stored samples (round
+    /// robin) against the current centre and makes each the witness of its
+    /// cell.
+    fn rescan(&mut self) {
+        let len = self.samples.len();
+        for _ in 0..RESCAN_PER_OFFER {
+            if self.cursor >= len {
+                self.cursor = 0;
+            }
+            let Some(s) = self.samples.get(self.cursor) else {
+                return;
+            };
+            let v = sub(s.xyz::<f32>(), self.centre);
+            if let Some(w) = cell(v).and_then(|c| self.witness.get_mut(c)) {
+                *w = self.cursor;
+            }
+            self.cursor += 1;
+        }
+    }
+
+    /// Samples, cells visited, percent and readiness.
+    ///
+    /// Re-classifies the at most [`CELLS`] cell witnesses against the
+    /// current centre: bounded work, independent of `N`.
+    ///
+    /// ```
+    /// use mag_cal_core::collector::{Collector, CELLS};
+    /// let c: Collector<[i16; 3], 300> = Collector::default();
+    /// let p = c.progress();
+    /// assert_eq!((p.samples, p.cells_visited, p.cells), (0, 0, CELLS));
+    /// assert_eq!((p.percent, p.ready), (0, false));
+    /// ```
+    pub fn progress(&self) -> Progress {
+        let mut visited = [false; CELLS];
+        for &i in &self.witness {
+            let Some(s) = self.samples.get(i) else {
+                continue;
+            };
+            let v = sub(s.xyz::<f32>(), self.centre);
+            if let Some(seen) = cell(v).and_then(|c| visited.get_mut(c)) {
+                *seen = true;
+            }
+        }
+        let cells_visited = visited.iter().filter(|&&v| v).count();
+        let samples = self.samples.len();
+        let required = READY_SAMPLES.min(N);
+        // A capacity of zero never gets a sample, and never gets ready
+        // either (no cell is visited).
+        let sample_percent = (samples.min(required) * 100)
+            .checked_div(required)
+            .unwrap_or(100);
+        let cell_percent = cells_visited.min(READY_CELLS) * 100 / READY_CELLS;
+        let percent = u8::try_from(sample_percent.min(cell_percent)).unwrap_or(100);
+        Progress {
+            samples,
+            cells_visited,
+            cells: CELLS,
+            percent,
+            ready: samples >= required && cells_visited >= READY_CELLS,
+        }
+    }
+
+    /// Whether coverage and count are enough to calibrate
+    /// (`self.progress().ready`).
+    pub fn is_ready(&self) -> bool {
+        self.progress().ready
+    }
+
+    /// The stored samples, oldest first: what [`crate::calibrate`] takes.
+    pub fn samples(&self) -> &[S] {
+        &self.samples
+    }
+
+    /// The running centre estimate (a rough hard iron, sensor units), or
+    /// `None` before the first sample.
+    pub fn centre(&self) -> Option<[f32; 3]> {
+        (!self.samples.is_empty()).then_some(self.centre)
+    }
+
+    /// Removes every sample and forgets the centre and the coverage; the
+    /// minimum angle is kept.
+    pub fn clear(&mut self) {
+        self.samples.clear();
+        self.fit = CentreFit::EMPTY;
+        self.centre = [0.0; 3];
+        self.witness = [NO_WITNESS; CELLS];
+        self.cursor = 0;
+    }
+
+    /// Number of stored samples.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Whether no sample is stored.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// The capacity `N`.
+    pub const fn capacity(&self) -> usize {
+        N
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_are_the_octants_and_bands() {
+        let d = core::f32::consts::FRAC_1_SQRT_2;
+        let mut seen = [false; CELLS];
+        for band in 0..BANDS {
+            let z = -1.0 + (band as f32 + 0.5) / 3.0;
+            let r = libm::sqrtf(1.0 - z * z);
+            for sector in 0..SECTORS {
+                let phi = (sector as f32 + 0.5) * core::f32::consts::FRAC_PI_4;
+                let u = [r * libm::cosf(phi), r * libm::sinf(phi), z];
+                let c = cell(u).unwrap();
+                assert_eq!(c, band * SECTORS + sector, "{band} {sector}");
+                assert_eq!(cell(u.map(|v| v * 1e3)), Some(c));
+                seen[c] = true;
+            }
+        }
+        assert!(seen.iter().all(|&s| s));
+        assert_eq!(cell([0.0, 0.0, 1.0]).unwrap() / SECTORS, BANDS - 1);
+        assert_eq!(cell([0.0, 0.0, -1.0]).unwrap() / SECTORS, 0);
+        assert_eq!(cell([f32::NAN; 3]), None);
+        assert_eq!(cell([0.0; 3]), None);
+        assert_eq!(cell([f32::MAX; 3]), None);
+        assert_eq!(cell([d, -d, 0.0]).unwrap() % SECTORS, 7);
+    }
+
+    #[test]
+    fn sphere_fit_is_exact_on_a_cap() {
+        // A cap of a sixth of the sphere, centre (10, -20, 30), radius 5.
+        let mut fit = CentreFit::EMPTY;
+        for i in 0..200 {
+            let z = 1.0 - (i as f32 + 0.5) / 600.0;
+            let r = libm::sqrtf(1.0 - z * z);
+            let phi = i as f32 * 2.399_963;
+            let y = [
+                10.0 + 5.0 * r * libm::cosf(phi),
+                -20.0 + 5.0 * r * libm::sinf(phi),
+                30.0 + 5.0 * z,
+            ];
+            fit = fit.with(y).unwrap();
+        }
+        let c = fit.centre();
+        // The midrange is 4.2 units up (z = 34.17); the regularised fit is
+        // pulled towards it by about 1 % along the cap's axis.
+        let mid = fit.origin[2] + 0.5 * (fit.lo[2] + fit.hi[2]);
+        assert!((mid - 34.17).abs() < 0.01, "{mid}");
+        assert!(
+            (c[0] - 10.0).abs() < 1e-3 && (c[1] + 20.0).abs() < 1e-3,
+            "{c:?}"
+        );
+        assert!((c[2] - 30.0).abs() < 0.06, "{c:?}");
+    }
+}

@@ -3,7 +3,7 @@
 
 use nalgebra::{Cholesky, Matrix3, SMatrix, SVector, Vector3};
 
-use crate::linalg::{sym_eigen, sym_inv_sqrt, sym_sqrt};
+use crate::linalg::{sym_eigen, sym_sqrt_and_inv_sqrt};
 use crate::moments::Moments;
 use crate::{Error, Real};
 
@@ -169,7 +169,6 @@ pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> 
         return Err(Error::NotAnEllipsoid);
     }
     let m = a / k;
-    let w = sym_sqrt(&m)?;
-    let t = sym_inv_sqrt(&m)?;
+    let (w, t) = sym_sqrt_and_inv_sqrt(&m)?;
     Ok(Ellipsoid { centre, m, w, t })
 }

@@ -47,16 +47,21 @@
 //! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 //!
+//! Around the fit: [`collector`] gathers samples one at a time on the
+//! device with coverage tracking, [`persist`] stores a calibration as
+//! checksummed bytes, [`quality`] holds the degenerate-geometry checks.
+//!
 //! # Features
-//! - `defmt`: derive `defmt::Format` for [`Error`], [`Method`], [`LsVariant`].
+//! - `defmt`: derive `defmt::Format` for [`Error`], [`Method`], [`LsVariant`],
+//!   [`Warning`], [`Warnings`] and the collector's `Offer` and `Progress`.
 //!
 //! Beyond ADC2, [`Method`] offers the paper's ADC1 (whose minimiser equals
 //! ADC2's, see [`methods::adc1`]) and subMLE baseline, and iterated ADC2,
 //! which reaches subMLE's accuracy at a fraction of its cost.
 //!
-//! # Not supported (yet)
-//! The degenerate-geometry checks beyond positive definiteness, streaming
-//! collection with coverage, and persistence are planned.
+//! # Not supported
+//! Online (recursive) estimation: every method runs on a stored batch.
+//! Temperature compensation, and sensor models beyond `y = T h + b + e`.
 
 #![no_std]
 #![forbid(unsafe_code)]

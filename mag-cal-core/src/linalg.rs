@@ -52,6 +52,26 @@ fn sym_function<T: Real>(m: &Matrix3<T>, f: impl Fn(T) -> T) -> Result<Matrix3<T
     Ok((v * Matrix3::from_diagonal(&d) * v.transpose()).symmetric_part())
 }
 
+/// `M^(1/2)` and `M^(-1/2)` from one eigen-decomposition.
+pub(crate) fn sym_sqrt_and_inv_sqrt<T: Real>(
+    m: &Matrix3<T>,
+) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
+    let eig = sym_eigen(m.symmetric_part())?;
+    let max = eig.eigenvalues.amax();
+    if !eig
+        .eigenvalues
+        .iter()
+        .all(|&l| l > max * T::EPSILON * T::lit(8.0))
+    {
+        return Err(Error::NotAnEllipsoid);
+    }
+    let v = &eig.eigenvectors;
+    let root = eig.eigenvalues.map(|l| l.sqrt());
+    let sqrt = v * Matrix3::from_diagonal(&root) * v.transpose();
+    let inv = v * Matrix3::from_diagonal(&root.map(|r| T::one() / r)) * v.transpose();
+    Ok((sqrt.symmetric_part(), inv.symmetric_part()))
+}
+
 /// The symmetric positive definite square root `M^(1/2)`.
 pub(crate) fn sym_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
     sym_function(m, |l| l.sqrt())

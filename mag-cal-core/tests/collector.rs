@@ -1,0 +1,423 @@
+//! The on-device collector: acceptance, coverage, readiness, capacity.
+
+use mag_cal_core::collector::{
+    Collector, Offer, CELLS, DEFAULT_MIN_ANGLE_DEG, READY_CELLS, READY_SAMPLES,
+};
+use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
+use mag_cal_core::{calibrate, Config};
+
+/// SplitMix64 with Box-Muller: deterministic noise without a dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn gauss(&mut self) -> f64 {
+        let u = self.uniform().max(1e-300);
+        let v = self.uniform();
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+}
+
+/// A firmware-like sensor: `y = b + rho T h + noise`, rounded to counts.
+struct Sensor {
+    t: Matrix3<f64>,
+    b: Vector3<f64>,
+    rho: f64,
+    noise: f64,
+    rng: Rng,
+}
+
+impl Sensor {
+    /// Field 320 counts, noise 2.5 counts, hard iron a few hundred counts;
+    /// soft iron `V diag(0.8, 1, 1.25) V^T` (tilted) or none.
+    fn new(soft_iron: bool) -> Self {
+        let t = if soft_iron {
+            let v = Rotation3::from_euler_angles(0.87, -0.35, 0.61);
+            v.matrix()
+                * Matrix3::from_diagonal(&Vector3::new(0.8, 1.0, 1.25))
+                * v.matrix().transpose()
+        } else {
+            Matrix3::identity()
+        };
+        Sensor {
+            t,
+            b: Vector3::new(180.0, -95.0, 240.0),
+            rho: 320.0,
+            noise: 2.5,
+            rng: Rng(0x6d61_672d_6361_6c21),
+        }
+    }
+
+    fn read(&mut self, h: &Vector3<f64>) -> [i16; 3] {
+        let e = Vector3::new(self.rng.gauss(), self.rng.gauss(), self.rng.gauss());
+        let y = self.b + self.t * h * self.rho + e * self.noise;
+        [y.x.round() as i16, y.y.round() as i16, y.z.round() as i16]
+    }
+}
+
+/// Field directions on a spiral from `z = z_hi` down to `z = z_lo`,
+/// `dphi` radians of longitude a step: a device turned steadily.
+fn spiral(z_hi: f64, z_lo: f64, n: usize, dphi: f64) -> Vec<Vector3<f64>> {
+    (0..n)
+        .map(|k| {
+            let z = z_hi - (z_hi - z_lo) * (k as f64 / (n - 1) as f64);
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let p = k as f64 * dphi;
+            Vector3::new(r * p.cos(), r * p.sin(), z)
+        })
+        .collect()
+}
+
+fn sin_deg(a: f64) -> f64 {
+    a.to_radians().sin()
+}
+
+/// Offers every direction; checks after each offer that `percent` is 100
+/// exactly when `ready`; returns the offer at which it first became ready.
+fn feed<const N: usize>(
+    collector: &mut Collector<[i16; 3], N>,
+    sensor: &mut Sensor,
+    dirs: &[Vector3<f64>],
+) -> Option<usize> {
+    let mut ready_at = None;
+    for (k, h) in dirs.iter().enumerate() {
+        collector.offer(sensor.read(h));
+        let p = collector.progress();
+        assert_eq!(p.percent == 100, p.ready, "{p:?}");
+        assert!(p.percent <= 100 && p.cells == CELLS && p.cells_visited <= CELLS);
+        assert_eq!(p.samples, collector.len());
+        if p.ready && ready_at.is_none() {
+            ready_at = Some(k);
+        }
+    }
+    ready_at
+}
+
+#[test]
+fn spiral_over_the_sphere_becomes_ready_and_calibrates() {
+    for soft_iron in [false, true] {
+        let mut sensor = Sensor::new(soft_iron);
+        let mut c: Collector<[i16; 3], 1000> = Collector::default();
+        let ready_at = feed(&mut c, &mut sensor, &spiral(1.0, -1.0, 900, 0.25));
+        let p = c.progress();
+        println!("soft iron {soft_iron}: {p:?}, ready at offer {ready_at:?}");
+        // Going from +z to -z, readiness comes past two thirds of the way.
+        let at = ready_at.expect("never ready");
+        assert!((500..800).contains(&at), "{at}");
+        assert!(p.ready && p.percent == 100);
+        assert!(p.cells_visited >= CELLS - 2, "{p:?}");
+        // The running centre is a rough hard iron.
+        let centre = Vector3::from(c.centre().unwrap()).cast::<f64>();
+        assert!((centre - sensor.b).norm() < 0.01 * sensor.rho, "{centre}");
+        // What the collector kept calibrates.
+        let fit = calibrate::<f32, _>(c.samples(), &Config::default()).unwrap();
+        let b = fit.calibration.hard_iron().cast::<f64>();
+        assert!((b - sensor.b).norm() < 0.005 * sensor.rho, "{b}");
+        let rho = f64::from(fit.calibration.field_strength());
+        assert!((rho - sensor.rho).abs() < 0.005 * sensor.rho, "{rho}");
+    }
+}
+
+#[test]
+fn a_planar_circle_never_becomes_ready() {
+    let dip = 60f64.to_radians();
+    // A level compass swing (the field on a cone, the samples on a plane),
+    // and a tumble about one tilted axis (a great circle of directions).
+    let level: Vec<_> = (0..5000)
+        .map(|k| {
+            let p = k as f64 * 0.05;
+            Vector3::new(dip.cos() * p.cos(), -dip.cos() * p.sin(), dip.sin())
+        })
+        .collect();
+    let r = Rotation3::from_euler_angles(0.4, 0.7, 0.1);
+    let great: Vec<_> = (0..5000)
+        .map(|k| {
+            let p = k as f64 * 0.05;
+            r * Vector3::new(p.cos(), p.sin(), 0.0)
+        })
+        .collect();
+    for soft_iron in [false, true] {
+        for (name, dirs) in [("level turn", &level), ("great circle", &great)] {
+            let mut sensor = Sensor::new(soft_iron);
+            let mut c: Collector<[i16; 3], 2000> = Collector::default();
+            assert_eq!(feed(&mut c, &mut sensor, dirs), None, "{name}");
+            let p = c.progress();
+            println!("{name}, soft iron {soft_iron}: {p:?}");
+            // A circle of directions crosses at most about 20 of the cells.
+            assert!(p.cells_visited <= 24 && p.percent <= 66, "{name}: {p:?}");
+            assert!(p.samples >= READY_SAMPLES);
+        }
+    }
+}
+
+#[test]
+fn a_band_of_30_deg_reaches_partial_coverage_only() {
+    // Elevation within +-30 deg: z/r within +-0.5 touches the four middle
+    // bands (32 cells, 67 %), short of the 36 needed; the module
+    // documentation lists 31-32 cells.
+    for soft_iron in [false, true] {
+        let mut sensor = Sensor::new(soft_iron);
+        let mut c: Collector<[i16; 3], 1000> = Collector::default();
+        let dirs = spiral(sin_deg(30.0), -sin_deg(30.0), 900, 0.25);
+        assert_eq!(feed(&mut c, &mut sensor, &dirs), None);
+        let p = c.progress();
+        println!("band +-30, soft iron {soft_iron}: {p:?}");
+        assert!((28..=32).contains(&p.cells_visited), "{p:?}");
+        assert!((77..=88).contains(&p.percent), "{p:?}");
+        assert!(!p.ready);
+        // Offering on (a device held still, in the band) refreshes the
+        // coverage through the round robin.
+        for _ in 0..1000 {
+            c.offer(sensor.read(&Vector3::x()));
+        }
+        let p = c.progress();
+        assert!((30..=32).contains(&p.cells_visited) && !p.ready, "{p:?}");
+    }
+}
+
+#[test]
+fn caps_are_not_mistaken_for_the_sphere() {
+    // The midrange centre would make a cap of 35 % of the sphere look ready
+    // (38 cells); the sphere fit sees about half of the cells.
+    for soft_iron in [false, true] {
+        let mut sensor = Sensor::new(soft_iron);
+        let mut c: Collector<[i16; 3], 1000> = Collector::default();
+        assert_eq!(
+            feed(&mut c, &mut sensor, &spiral(1.0, 0.3, 900, 0.25)),
+            None
+        );
+        let p = c.progress();
+        println!("cap z > 0.3, soft iron {soft_iron}: {p:?}");
+        assert!(p.cells_visited <= 26, "{p:?}");
+    }
+}
+
+#[test]
+fn identical_samples_are_too_close_after_the_first() {
+    let mut c: Collector<[i16; 3], 100> = Collector::default();
+    assert_eq!(c.offer([100, 200, 300]), Offer::Accepted);
+    for _ in 0..50 {
+        assert_eq!(c.offer([100, 200, 300]), Offer::TooClose);
+    }
+    assert_eq!(c.len(), 1);
+    // Also later, and with a minimum angle of zero.
+    let mut c: Collector<[f32; 3], 100> = Collector::new(0.0);
+    assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted);
+    assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted);
+    assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::TooClose);
+    assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::Accepted);
+    assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::TooClose);
+    assert_eq!(c.len(), 3);
+}
+
+#[test]
+fn a_device_held_still_adds_nothing() {
+    let mut sensor = Sensor::new(true);
+    let mut c: Collector<[i16; 3], 1000> = Collector::default();
+    feed(&mut c, &mut sensor, &spiral(1.0, -1.0, 900, 0.25));
+    let before = c.len();
+    let h = Vector3::new(0.3, -0.5, 0.8).normalize();
+    let mut accepted = 0;
+    for _ in 0..2000 {
+        if c.offer(sensor.read(&h)) == Offer::Accepted {
+            accepted += 1;
+        }
+    }
+    // Noise of 0.45 deg never fakes a 4 deg turn; at most the first reading
+    // is new.
+    assert!(accepted <= 1, "{accepted}");
+    assert!(c.len() <= before + 1);
+}
+
+#[test]
+fn the_minimum_angle_is_measured_from_the_last_sample_kept() {
+    // Noise-free samples on a sphere: once it is covered the centre is
+    // exact, so directions are the true ones.
+    let b = [180.0f32, -95.0, 240.0];
+    let point = |h: Vector3<f64>| {
+        let h = h.cast::<f32>() * 320.0;
+        [b[0] + h.x, b[1] + h.y, b[2] + h.z]
+    };
+    let mut c: Collector<[f32; 3], 2000> = Collector::default();
+    for h in spiral(1.0, -1.0, 900, 0.25) {
+        c.offer(point(h));
+    }
+    let centre = c.centre().unwrap();
+    assert!(
+        (0..3).all(|k| (centre[k] - b[k]).abs() < 1e-2),
+        "{centre:?}"
+    );
+    // Turning in 0.3 deg steps keeps every 14th reading (4.2 deg; steps
+    // that land on exactly 4 deg would test rounding, not the rule).
+    let mut kept = Vec::new();
+    for k in 0..=150 {
+        let a = (k as f64 * 0.3).to_radians();
+        if c.offer(point(Vector3::new(a.cos(), 0.0, a.sin()))) == Offer::Accepted {
+            kept.push(k);
+        }
+    }
+    println!("kept {kept:?}");
+    assert_eq!(kept, (0..=150).step_by(14).collect::<Vec<_>>());
+    // Larger minimum angle, same rule.
+    let mut c10: Collector<[f32; 3], 2000> = Collector::new(10.0);
+    for h in spiral(1.0, -1.0, 900, 0.25) {
+        c10.offer(point(h));
+    }
+    let mut kept = Vec::new();
+    for k in 0..=150 {
+        let a = (k as f64 * 0.3).to_radians();
+        if c10.offer(point(Vector3::new(a.cos(), 0.0, a.sin()))) == Offer::Accepted {
+            kept.push(k);
+        }
+    }
+    assert_eq!(kept, (0..=150).step_by(34).collect::<Vec<_>>());
+}
+
+#[test]
+fn non_finite_samples_are_refused() {
+    let mut c: Collector<[f32; 3], 10> = Collector::default();
+    assert_eq!(c.offer([f32::NAN, 1.0, 2.0]), Offer::NotFinite);
+    assert_eq!(c.offer([1.0, f32::INFINITY, 2.0]), Offer::NotFinite);
+    assert_eq!(c.offer([1.0, 2.0, f32::NEG_INFINITY]), Offer::NotFinite);
+    assert!(c.is_empty() && c.centre().is_none());
+    assert_eq!(c.offer([1.0, 2.0, 3.0]), Offer::Accepted);
+    // Finite but so far away that the sums would overflow f32.
+    assert_eq!(c.offer([1e30, 0.0, 0.0]), Offer::NotFinite);
+    assert_eq!(c.offer([f32::MAX, f32::MAX, f32::MAX]), Offer::NotFinite);
+    assert_eq!(c.len(), 1);
+    assert_eq!(c.centre(), Some([1.0, 2.0, 3.0]));
+
+    let mut c: Collector<[f64; 3], 10> = Collector::default();
+    assert_eq!(c.offer([1e300, 0.0, 0.0]), Offer::NotFinite);
+    assert_eq!(c.offer([f64::NAN, 0.0, 0.0]), Offer::NotFinite);
+    assert!(c.is_empty());
+}
+
+#[test]
+fn capacity_is_respected() {
+    let mut c: Collector<[i16; 3], 3> = Collector::default();
+    assert_eq!((c.len(), c.capacity(), c.is_empty()), (0, 3, true));
+    assert_eq!(c.offer([100, 0, 0]), Offer::Accepted);
+    assert_eq!(c.offer([-100, 0, 0]), Offer::Accepted);
+    assert_eq!(c.offer([0, 100, 0]), Offer::Accepted);
+    assert_eq!(c.offer([0, -100, 0]), Offer::Full);
+    assert_eq!(c.offer([0, 0, 100]), Offer::Full);
+    assert_eq!(c.samples(), &[[100, 0, 0], [-100, 0, 0], [0, 100, 0]]);
+    // Full before anything else, even for a NaN.
+    let mut f: Collector<[f32; 3], 1> = Collector::default();
+    assert_eq!(f.offer([0.0, 0.0, 1.0]), Offer::Accepted);
+    assert_eq!(f.offer([f32::NAN; 3]), Offer::Full);
+    // A small collector is ready when full, if coverage allows: here it
+    // cannot reach 36 cells with 3 samples.
+    assert!(!c.is_ready());
+    c.clear();
+    assert!(c.is_empty() && c.centre().is_none());
+    let p = c.progress();
+    assert_eq!(
+        (p.samples, p.cells_visited, p.percent, p.ready),
+        (0, 0, 0, false)
+    );
+    assert_eq!(c.offer([0, -100, 0]), Offer::Accepted);
+    // Capacity zero: always full, never ready.
+    let mut z: Collector<[i16; 3], 0> = Collector::default();
+    assert_eq!(z.offer([1, 2, 3]), Offer::Full);
+    assert!(!z.is_ready());
+}
+
+#[test]
+fn works_at_capacity_2000() {
+    // offer() is O(1): no loop over the stored samples (the running sums,
+    // one 3x3 solve, and a round robin of 4 stored samples per call); the
+    // collector fills up and keeps answering.
+    let mut sensor = Sensor::new(true);
+    let mut c: Collector<[i16; 3], 2000> = Collector::default();
+    let dirs = spiral(1.0, -1.0, 1950, 0.25);
+    let mut full = 0;
+    for pass in 0..2 {
+        for h in &dirs {
+            if c.offer(sensor.read(h)) == Offer::Full {
+                full += 1;
+            }
+        }
+        println!("pass {pass}: {:?}", c.progress());
+    }
+    assert_eq!(c.len(), 2000);
+    assert!(full > 0);
+    let p = c.progress();
+    assert!(p.ready && p.cells_visited >= CELLS - 2, "{p:?}");
+    let fit = calibrate::<f32, _>(c.samples(), &Config::default()).unwrap();
+    assert!((fit.calibration.hard_iron().cast::<f64>() - sensor.b).norm() < 1.5);
+}
+
+#[test]
+fn percent_combines_cells_and_count() {
+    // Every cell of a collector of capacity 50 reached with 50 samples:
+    // count fraction 100 % (capacity below READY_SAMPLES), cells decide.
+    let mut sensor = Sensor::new(false);
+    sensor.noise = 0.0;
+    let mut c: Collector<[i16; 3], 50> = Collector::default();
+    // Fibonacci directions: far apart, evenly spread.
+    for i in 0..50 {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / 50.0;
+        let r = (1.0 - z * z).sqrt();
+        let phi = i as f64 * 2.399_963_229_728_653;
+        c.offer(sensor.read(&Vector3::new(r * phi.cos(), r * phi.sin(), z)));
+    }
+    for _ in 0..100 {
+        c.offer([0, 0, 0]); // Full; refreshes the coverage
+    }
+    let p = c.progress();
+    println!("{p:?}");
+    assert_eq!(p.samples, 50);
+    assert!(
+        p.cells_visited >= READY_CELLS && p.ready && p.percent == 100,
+        "{p:?}"
+    );
+}
+
+#[test]
+fn min_angle_arguments_are_sanitised() {
+    for a in [
+        f32::NAN,
+        -5.0,
+        0.0,
+        1e9,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        DEFAULT_MIN_ANGLE_DEG,
+    ] {
+        let mut c: Collector<[f32; 3], 8> = Collector::new(a);
+        assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted, "{a}");
+        assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::TooClose, "{a}");
+        // Antipodes are 180 deg apart: kept at every minimum angle.
+        assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted, "{a}");
+    }
+}
+
+#[test]
+fn hostile_input_never_panics() {
+    let mut rng = Rng(1);
+    let mut cf: Collector<[f32; 3], 64> = Collector::default();
+    let mut ci: Collector<[i32; 3], 64> = Collector::new(0.0);
+    let mut ch: Collector<[i16; 3], 64> = Collector::new(180.0);
+    for k in 0..20_000 {
+        let bits = [0, 1, 2].map(|_| (rng.uniform() * 4_294_967_296.0) as u32);
+        cf.offer(bits.map(f32::from_bits));
+        ci.offer(bits.map(|b| b as i32));
+        ch.offer(bits.map(|b| b as i16));
+        if k % 1000 == 0 {
+            let _ = (cf.progress(), ci.progress(), ch.progress());
+            cf.clear();
+        }
+    }
+    let _ = (cf.progress(), ci.progress(), ch.progress());
+    assert!(ci.len() <= 64 && ch.len() <= 64);
+}
