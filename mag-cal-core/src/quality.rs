@@ -151,30 +151,65 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     w: &Matrix3<T>,
 ) -> Result<FinalPass<T>, Error> {
     let one = T::one();
-    let mut sq = T::zero();
-    let mut s_h = Vector3::zeros();
-    let mut s_hh = Matrix3::zeros();
+    let (cx, cy, cz, is) = (norm.centre.x, norm.centre.y, norm.centre.z, norm.inv_scale);
+    let (bx, by, bz) = (centre.x, centre.y, centre.z);
+    let [w00, w10, w20, w01, w11, w21, w02, w12, w22] = [
+        w[(0, 0)],
+        w[(1, 0)],
+        w[(2, 0)],
+        w[(0, 1)],
+        w[(1, 1)],
+        w[(2, 1)],
+        w[(0, 2)],
+        w[(1, 2)],
+        w[(2, 2)],
+    ];
+    // Scalar accumulators: squared radial error, sum h, sum h h^T (upper).
+    let mut total = [T::zero(); 10];
     let mut count = 0usize;
     for block in samples.chunks(BLOCK) {
-        let (mut sq_b, mut s_h_b, mut s_hh_b) = (T::zero(), Vector3::zeros(), Matrix3::zeros());
-        for y in block.iter().filter_map(finite::<T, S>) {
-            let u = w * (norm.forward(y) - centre);
-            let u2 = u.norm_squared();
-            let r = u2.sqrt();
-            // |u| - 1 = (|u|^2 - 1) / (|u| + 1): no extra cancellation.
-            let e = (u2 - one) / (r + one);
-            sq_b += e * e;
-            if r > T::zero() {
-                let h = u / r;
-                s_h_b += h;
-                s_hh_b += h * h.transpose();
-            }
+        let mut a = [T::zero(); 10];
+        for sample in block {
+            let Some([y0, y1, y2]) = finite::<T, S>(sample) else {
+                continue;
+            };
+            let dx = (y0 - cx) * is - bx;
+            let dy = (y1 - cy) * is - by;
+            let dz = (y2 - cz) * is - bz;
+            let ux = w00 * dx + w01 * dy + w02 * dz;
+            let uy = w10 * dx + w11 * dy + w12 * dz;
+            let uz = w20 * dx + w21 * dy + w22 * dz;
+            let q = ux * ux + uy * uy + uz * uz;
             count += 1;
+            if !(q >= T::MIN_POSITIVE) {
+                // At the centre: |u| - 1 = -1, no direction.
+                a[0] += one;
+                continue;
+            }
+            let inv = q.rsqrt();
+            // |u| - 1 = (|u|^2 - 1) / (|u| + 1): no extra cancellation.
+            let e = (q - one) / (q * inv + one);
+            a[0] += e * e;
+            let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
+            a[1] += hx;
+            a[2] += hy;
+            a[3] += hz;
+            a[4] += hx * hx;
+            a[5] += hx * hy;
+            a[6] += hx * hz;
+            a[7] += hy * hy;
+            a[8] += hy * hz;
+            a[9] += hz * hz;
         }
-        sq += sq_b;
-        s_h += s_h_b;
-        s_hh += s_hh_b;
+        for (t, v) in total.iter_mut().zip(a) {
+            *t += v;
+        }
     }
+    let sq = total[0];
+    let s_h = Vector3::new(total[1], total[2], total[3]);
+    let s_hh = Matrix3::new(
+        total[4], total[5], total[6], total[5], total[7], total[8], total[6], total[8], total[9],
+    );
     if count == 0 {
         return Err(Error::TooFewSamples {
             found: 0,
