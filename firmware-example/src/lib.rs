@@ -9,12 +9,19 @@
 //! - `qemu`: QEMU's mps2-an386 with a register-level simulated LSM303AGR on
 //!   a simulated I2C bus ([`sim_sensor`], physics in [`sim`]), which also
 //!   knows the truth, so the run checks itself and exits non-zero when the
-//!   calibration is off.
+//!   calibration is off;
+//! - `faults` (with `qemu`): the simulated sensor misbehaves on a schedule
+//!   (`sim::Faults::RUN`: NACK bursts, stuck output, saturation, a passing
+//!   magnet) and the run ends with a summary line of the faults seen and
+//!   handled. The application's fault handling is the same in every build.
 //!
-//! The flow: initialise the sensor through the unmodified `lsm303agr`
-//! driver; collect 600 raw samples while the device is turned in all
-//! directions; calibrate on the chip (ADC2, `f32`); log the calibration;
-//! then stream a smoothed, calibrated level heading.
+//! The flow at each boot: initialise the sensor through the unmodified
+//! `lsm303agr` driver (retrying I2C failures, [`faults`]); load the stored
+//! calibration ([`storage`]), or, when there is none valid, collect samples
+//! with the core's `Collector` while the device is turned in all
+//! directions, calibrate on the chip (ADC2, `f32`) and store the result;
+//! then stream a smoothed, calibrated level heading. Every reading passes
+//! the fault monitor ([`faults::Monitor`]) first.
 
 #![no_std]
 
@@ -25,8 +32,9 @@ compile_error!(
 #[cfg(not(any(feature = "board", feature = "qemu")))]
 compile_error!("choose one of the features `board` (default) and `qemu`");
 
-pub mod coverage;
+pub mod faults;
 pub mod heading;
+pub mod storage;
 
 #[cfg(feature = "board")]
 pub mod board;
@@ -52,4 +60,14 @@ pub struct Truth {
     pub soft_iron: Matrix3<f32>,
     /// `rho = |det T|^(1/3)`, counts.
     pub field_strength: f32,
+}
+
+/// What the application did about the calibration at one boot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum BootOutcome {
+    /// A valid stored calibration was loaded; no calibration ran.
+    Loaded,
+    /// Nothing valid was stored (why: the load's error); the device was
+    /// calibrated and the result stored.
+    Calibrated(storage::LoadError),
 }

@@ -3,42 +3,109 @@
 //! One application, two wirings (chosen by feature, nothing else is gated):
 //!
 //! - `board` (default): BBC micro:bit v2, its LSM303AGR on the internal I2C
-//!   bus ([`board`]);
+//!   bus ([`board`]), the calibration in the last flash page;
 //! - `qemu`: QEMU's mps2-an386 with a register-level simulated LSM303AGR on
-//!   a simulated I2C bus ([`sim_sensor`], physics in [`sim`]), which also
-//!   knows the truth, so the run checks itself and exits non-zero when the
-//!   calibration is off.
+//!   a simulated I2C bus ([`sim_sensor`], physics in [`sim`]) and a RAM
+//!   stand-in for the flash page; the simulator knows the truth, so the run
+//!   checks itself and exits non-zero when the calibration is off. With
+//!   `faults` as well, the simulated sensor misbehaves (NACK bursts, stuck
+//!   output, saturation, a passing magnet) and the run also checks that
+//!   every fault was seen and handled and that no faulty sample was used.
 //!
-//! The flow: initialise the sensor through the unmodified `lsm303agr`
-//! driver; collect 600 raw samples while the device is turned in all
-//! directions; calibrate on the chip (ADC2, `f32`); log the calibration;
-//! then stream a smoothed, calibrated level heading.
+//! # The flow of one boot
+//!
+//! 1. Start the sensor through the unmodified `lsm303agr` driver (`init`,
+//!    high resolution at 20 Hz, continuous mode); every I2C operation is
+//!    retried ([`faults::retry`]).
+//! 2. Load the stored calibration ([`storage::load`]). If it is valid, use
+//!    it: no calibration runs. If not (an erased page, a corrupted record,
+//!    implausible values), calibrate:
+//!    - offer the readings that pass the fault monitor to a
+//!      `Collector<[i16; 3], 600>`, logging its progress at every 10 %;
+//!    - stop [`TOP_UP`] readings after the collector is ready, or when it
+//!      is full (see below);
+//!    - calibrate (ADC2, `f32`), log the calibration, its quality figures
+//!      and warnings; a refusal (or a fit with a sample far off its sphere,
+//!      [`MAX_RESIDUAL`]) clears the collector and starts again, at most
+//!      [`COLLECT_ATTEMPTS`] times;
+//!    - store the calibration (erase, program, read back, reload and
+//!      compare).
+//! 3. Stream 36 level headings, each the circular mean of the 15 readings
+//!    of one stop of a compass swing.
+//!
+//! On the board a run is one boot (a reset is a real reset). Under QEMU the
+//! run boots three times in a row with the same sensor and flash: boot 1
+//! finds the page erased and calibrates, boot 2 loads that calibration and
+//! skips the calibration, and before boot 3 the simulator flips a bit of
+//! the record, so boot 3 finds a checksum mismatch and calibrates again.
+//!
+//! Every reading passes [`faults::Monitor`] before it is used: exact
+//! repeats (stuck output), saturated readings and disturbed readings (the
+//! field's norm off its reference) are excluded, and clean readings are
+//! held back [`faults::GUARD`] readings so that those just before a
+//! saturation or a disturbance are dropped too. Only readings released by
+//! the monitor reach the collector or the headings, so a stored calibration
+//! is never computed from a reading flagged bad.
+//!
+//! # When to stop collecting
+//!
+//! The collector is ready at 36 of its 48 direction cells: the least the
+//! core accepts as coverage. On the simulator's motion, a pole-to-pole
+//! spiral, that is a cap of about two thirds of the sphere after 390-450
+//! samples, and calibrating there is markedly worse than on the full
+//! sphere: over 200 seeds on the host, e_b median 1.8e-3, worst 9.9e-3;
+//! e_S median 3.3e-3, worst 1.1e-2, against 0.9e-3 / 2.2e-3 and 2.0e-3 /
+//! 3.8e-3 with the whole sphere, so the worst cases would break the bounds
+//! below (which were set for full coverage). As the core says, collecting
+//! on after ready only improves the calibration: the firmware goes on for
+//! [`TOP_UP`] = 200 more readings (10 s at 20 Hz; on the simulator that
+//! closes the sphere, 590-600 samples) or until the collector is full.
+//! Without the motion to fill it, the top-up ends on time and the
+//! calibration uses what it has, which the core judged enough.
 
 #![no_std]
 #![no_main]
 
 use core::fmt::Debug;
 
-use defmt::{error, info};
+use defmt::{error, info, warn};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
+use mag_cal_core::collector::{Collector, Offer, CELLS};
 use mag_cal_core::heading::{heading_deg, wrap_deg, HeadingSmoother, DEFAULT_WINDOW};
 use mag_cal_core::nalgebra::Vector3;
-use mag_cal_core::{calibrate, Calibration, Config, SampleStore};
+use mag_cal_core::{calibrate, Calibration, Config, Fit};
 
+use firmware_example::faults::{
+    raw_reference, retry, FaultLog, Monitor, Reference, Retry, GUARD, LONG_DISTURBANCE,
+};
 use firmware_example::heading::wrap_360;
-use firmware_example::{coverage, platform, Truth};
+use firmware_example::storage::{self, RECORD_LEN};
+use firmware_example::{platform, BootOutcome, Truth};
 
-/// Samples collected for the calibration.
-const SAMPLES: usize = 600;
-/// Progress is logged every this many samples.
-const PROGRESS_EVERY: usize = 100;
+/// Capacity of the collector: 600 samples of 6 bytes (3.6 kB).
+const CAPACITY: usize = 600;
+/// Readings collected after the collector is ready (see the crate
+/// documentation).
+const TOP_UP: u32 = 200;
+/// Readings before a collection attempt ends, ready or not (2 min at
+/// 20 Hz): a device that is not turned fills nothing.
+const MAX_READINGS: u32 = 2_400;
+/// Collections (each followed by a calibration) before giving up.
+const COLLECT_ATTEMPTS: u32 = 3;
+/// Largest `| |W (y - b)| - 1 |` of a collected sample that a calibration
+/// may leave: a sample further off its sphere means the collection was
+/// contaminated after all (a disturbance below the detection threshold),
+/// and the calibration is not stored. Clean fits leave at most 0.040 on
+/// the simulator (worst of 200 runs; noise 2.5 counts at 320) and about
+/// 0.1 on the noisiest real sensors of the core's data (radial RMS 0.027).
+const MAX_RESIDUAL: f32 = 0.2;
 /// Window of the heading smoother (15, the paper's best).
 const SMOOTHING: usize = DEFAULT_WINDOW;
 /// Headings streamed after the calibration (a compass swing in steps of
-/// 10 deg), one per `SMOOTHING` samples.
+/// 10 deg), one per `SMOOTHING` readings.
 const HEADINGS: u32 = 36;
 /// Status polls before giving up on a sample (1 ms apart on the board, where
 /// a sample arrives every 50 ms at 20 Hz).
@@ -67,6 +134,11 @@ const MAX_POLLS: u32 = 2_000;
 // calibration) and about 5x the typical value (so a real regression, e.g.
 // a bias of a count in b or 1 % in T, fails). They are also far below what
 // a compass user would notice: 5e-3 of rho is 1.6 counts = 0.24 uT.
+// The collection that stops TOP_UP readings after ready ends with 590-600
+// samples on the whole sphere: over 200 seeds, e_b worst 2.2e-3 and e_S
+// worst 3.8e-3, the same as the 600 fixed samples the bounds were made for.
+// The fault run uses the same bounds: the faulty readings are excluded, so
+// the calibration sees clean samples only, a few fewer of them.
 const E_B_MAX: f32 = 5e-3;
 const E_S_MAX: f32 = 1e-2;
 const HEADING_MAX_ERR_DEG: f32 = 2.0;
@@ -84,32 +156,158 @@ fn check<T, E: Debug>(r: Result<T, E>, what: &str) -> T {
 
 type Sensor<I> = Lsm303agr<I2cInterface<I>, MagContinuous>;
 
-/// Waits for the next magnetometer sample and returns it in raw counts
-/// (1.5 mG = 150 nT each): the calibration works in the sensor's own unit.
-fn read_sample<I: I2c>(sensor: &mut Sensor<I>, delay: &mut impl DelayNs) -> [i16; 3] {
-    for _ in 0..MAX_POLLS {
-        if check(sensor.mag_status(), "reading the magnetometer status").xyz_new_data() {
-            let (x, y, z) =
-                check(sensor.magnetic_field(), "reading the magnetometer").xyz_unscaled();
-            return [x, y, z];
-        }
-        delay.delay_ms(1);
-    }
-    error!("no magnetometer sample after {} polls", MAX_POLLS);
-    platform::exit(false)
+/// What travels with a reading through the fault monitor: the simulator's
+/// truth about it (none on the board).
+#[derive(Clone, Copy)]
+struct Meta {
+    /// True level heading, degrees.
+    true_heading: Option<f32>,
+    /// The simulator injected a fault into this sample.
+    faulty: bool,
+}
+
+/// What the device, the bench and the fault bookkeeping share.
+struct Device<'a, 'b, I: I2c, D: DelayNs> {
+    sensor: Sensor<I>,
+    delay: &'a mut D,
+    bench: &'a mut platform::Bench<'b>,
+    log: &'a mut FaultLog,
+    monitor: Monitor<Meta>,
 }
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
     info!("mag-cal firmware example on {=str}", platform::NAME);
     let mut hardware = platform::Hardware::take();
-    let (i2c, delay, mut bench) = hardware.split();
+    let (mut i2c, delay, mut bench, storage) = hardware.split();
+    let mut log = FaultLog::default();
 
-    // --- sensor, through the lsm303agr driver
+    let mut flow_ok = true;
+    let mut previous: Option<Calibration<f32>> = None;
+    // Worst over the boots: e_b, e_S, heading error, uncalibrated heading error.
+    let mut worst: Option<(f32, f32, f32, f32)> = None;
+    for boot in 1..=bench.boots() {
+        bench.before_boot(boot, storage);
+        let (outcome, cal, heading_err, raw_err) =
+            run_boot(&mut i2c, delay, &mut bench, storage, &mut log);
+        flow_ok &= bench.check_boot(boot, outcome, &cal, previous.as_ref());
+        if let Some(truth) = bench.truth() {
+            let Some((e_b, e_s)) = parameter_errors(&cal, &truth) else {
+                error!("could not compare with the truth (singular matrix)");
+                platform::exit(false)
+            };
+            info!(
+                "boot {=u32} ({}): e_b={=f32} e_S={=f32} heading_max_err_deg={=f32}",
+                boot, outcome, e_b, e_s, heading_err
+            );
+            let w = worst.get_or_insert((0.0, 0.0, 0.0, 0.0));
+            *w = (
+                w.0.max(e_b),
+                w.1.max(e_s),
+                w.2.max(heading_err),
+                w.3.max(raw_err),
+            );
+        }
+        previous = Some(cal);
+    }
+
+    // --- the end: fault check, summary, self-check (only the simulator
+    // knows the truth); the last two lines are the summaries.
+    let faults_ok = bench
+        .injected()
+        .is_none_or(|injected| check_faults(&log, injected));
+    let show_faults = cfg!(feature = "faults") || log.any_seen();
+    let Some(truth) = bench.truth() else {
+        if show_faults {
+            log.log_details();
+            log.log_summary();
+        }
+        info!("done");
+        platform::exit(flow_ok)
+    };
+    let (e_b, e_s, heading_err, raw_err) = worst.unwrap_or((f32::NAN, f32::NAN, f32::NAN, 0.0));
+    info!(
+        "truth: b = [{=f32}, {=f32}, {=f32}], rho = {=f32} counts; uncalibrated heading max error {=f32} deg",
+        truth.hard_iron.x,
+        truth.hard_iron.y,
+        truth.hard_iron.z,
+        truth.field_strength,
+        raw_err
+    );
+    let bounds_ok = e_b < E_B_MAX && e_s < E_S_MAX && heading_err < HEADING_MAX_ERR_DEG;
+    if !bounds_ok {
+        error!(
+            "errors exceed the bounds e_b < {=f32}, e_S < {=f32}, heading < {=f32} deg",
+            E_B_MAX, E_S_MAX, HEADING_MAX_ERR_DEG
+        );
+    }
+    if !flow_ok {
+        error!("the boot flow (load, calibrate, store, reload) went wrong");
+    }
+    if show_faults {
+        log.log_details();
+        log.log_summary();
+    }
+    info!(
+        "calibrated: e_b={=f32} e_S={=f32} heading_max_err_deg={=f32}",
+        e_b, e_s, heading_err
+    );
+    platform::exit(bounds_ok && flow_ok && faults_ok)
+}
+
+/// One boot of the application: start the sensor, load or calibrate (and
+/// store), stream headings. Returns what happened, the calibration used, and
+/// the largest heading errors (calibrated, uncalibrated; 0 without truth).
+fn run_boot<I: I2c, D: DelayNs>(
+    i2c: &mut I,
+    delay: &mut D,
+    bench: &mut platform::Bench<'_>,
+    storage: &mut platform::CalibrationStorage,
+    log: &mut FaultLog,
+) -> (BootOutcome, Calibration<f32>, f32, f32) {
+    let sensor = start_sensor(i2c, delay, log);
+    let mut dev = Device {
+        sensor,
+        delay,
+        bench,
+        log,
+        monitor: Monitor::new(),
+    };
+
+    let (outcome, cal) = match storage::load(storage) {
+        Ok(cal) => {
+            let b = cal.hard_iron();
+            info!(
+                "loaded the stored calibration from {=str}: b = [{=f32}, {=f32}, {=f32}], rho = {=f32} counts; skipping the calibration",
+                platform::STORAGE_NAME,
+                b.x,
+                b.y,
+                b.z,
+                cal.field_strength()
+            );
+            (BootOutcome::Loaded, cal)
+        }
+        Err(why) => {
+            info!("no valid stored calibration ({}): calibrating", why);
+            let cal = calibrate_device(&mut dev);
+            save(storage, &cal);
+            (BootOutcome::Calibrated(why), cal)
+        }
+    };
+    let (heading_err, raw_err) = stream_headings(&mut dev, &cal);
+    (outcome, cal, heading_err, raw_err)
+}
+
+/// Initialises the LSM303AGR and starts the magnetometer (continuous, high
+/// resolution, 20 Hz), retrying every I2C operation.
+fn start_sensor<I: I2c, D: DelayNs>(i2c: I, delay: &mut D, log: &mut FaultLog) -> Sensor<I> {
     let mut sensor = Lsm303agr::new_with_i2c(i2c);
-    check(sensor.init(), "initialising the LSM303AGR");
-    let accel_id = check(sensor.accelerometer_id(), "reading WHO_AM_I_A");
-    let mag_id = check(sensor.magnetometer_id(), "reading WHO_AM_I_M");
+    let what = "initialising the LSM303AGR";
+    check(retry(log, delay, what, |_| sensor.init()), what);
+    let what = "reading WHO_AM_I_A";
+    let accel_id = check(retry(log, delay, what, |_| sensor.accelerometer_id()), what);
+    let what = "reading WHO_AM_I_M";
+    let mag_id = check(retry(log, delay, what, |_| sensor.magnetometer_id()), what);
     if !accel_id.is_correct() || !mag_id.is_correct() {
         error!(
             "not an LSM303AGR: WHO_AM_I_A {=u8:#x}, WHO_AM_I_M {=u8:#x}",
@@ -118,66 +316,211 @@ fn main() -> ! {
         );
         platform::exit(false)
     }
+    let what = "setting the magnetometer mode";
     check(
-        sensor.set_mag_mode_and_odr(delay, MagMode::HighResolution, MagOutputDataRate::Hz20),
-        "setting the magnetometer mode",
+        retry(log, delay, what, |d| {
+            sensor.set_mag_mode_and_odr(d, MagMode::HighResolution, MagOutputDataRate::Hz20)
+        }),
+        what,
     );
-    let mut sensor = check(
-        sensor.into_mag_continuous().map_err(|e| e.error),
-        "starting continuous mode",
-    );
+    // The mode change consumes the driver and hands it back on failure.
+    let mut attempt = Retry::new(log, "starting continuous mode");
+    let mut one_shot = sensor;
+    let sensor = loop {
+        match one_shot.into_mag_continuous() {
+            Ok(s) => {
+                attempt.succeeded();
+                break s;
+            }
+            Err(e) => {
+                if !attempt.failed(&e.error) {
+                    error!("starting continuous mode failed");
+                    platform::exit(false)
+                }
+                one_shot = e.dev;
+                delay.delay_ms(1);
+            }
+        }
+    };
     info!("LSM303AGR ready: magnetometer continuous, high resolution, 20 Hz");
+    sensor
+}
 
-    // --- collection
-    bench.begin_sweep();
-    let mut store: SampleStore<[i16; 3], SAMPLES> = SampleStore::new();
-    while !store.is_full() {
-        let sample = read_sample(&mut sensor, delay);
-        check(store.push(sample), "storing a sample");
-        if store.len().is_multiple_of(PROGRESS_EVERY) {
-            match coverage::cells_visited(store.as_slice()) {
-                Ok(cells) => info!(
-                    "collected {}/{} samples, {}/{} direction cells visited",
-                    store.len(),
-                    SAMPLES,
-                    cells,
-                    coverage::CELLS
-                ),
-                Err(e) => info!(
-                    "collected {}/{} samples, coverage unknown ({})",
-                    store.len(),
-                    SAMPLES,
-                    e
-                ),
+impl<I: I2c, D: DelayNs> Device<'_, '_, I, D> {
+    /// Waits for the next magnetometer sample and returns it in raw counts
+    /// (1.5 mG = 150 nT each: the calibration works in the sensor's own
+    /// unit), with the simulator's truth about it. An I2C operation that
+    /// still fails after its retries counts as a missed poll.
+    fn read(&mut self) -> ([i16; 3], Meta) {
+        for _ in 0..MAX_POLLS {
+            let sensor = &mut self.sensor;
+            let status = retry(
+                self.log,
+                self.delay,
+                "reading the magnetometer status",
+                |_| sensor.mag_status(),
+            );
+            if status.is_ok_and(|s| s.xyz_new_data()) {
+                let field = retry(self.log, self.delay, "reading the magnetometer", |_| {
+                    sensor.magnetic_field()
+                });
+                if let Ok(field) = field {
+                    let (x, y, z) = field.xyz_unscaled();
+                    let meta = Meta {
+                        true_heading: self.bench.true_heading_deg(),
+                        faulty: self.bench.latched_faulty(),
+                    };
+                    return ([x, y, z], meta);
+                }
+            }
+            self.delay.delay_ms(1);
+        }
+        error!("no magnetometer sample after {} polls", MAX_POLLS);
+        platform::exit(false)
+    }
+
+    /// Reads a sample and passes it through the fault monitor; returns the
+    /// reading the monitor releases, if any.
+    fn next_clean(&mut self, reference: &Reference<'_>) -> Option<([i16; 3], Meta)> {
+        let (raw, meta) = self.read();
+        self.monitor.push(raw, meta, reference, self.log).1
+    }
+}
+
+/// Collects and calibrates until the core accepts a calibration, at most
+/// [`COLLECT_ATTEMPTS`] times; the program ends when none succeeds.
+fn calibrate_device<I: I2c, D: DelayNs>(dev: &mut Device<'_, '_, I, D>) -> Calibration<f32> {
+    let mut collector: Collector<[i16; 3], CAPACITY> = Collector::default();
+    for attempt in 1..=COLLECT_ATTEMPTS {
+        dev.bench.begin_sweep();
+        collector.clear();
+        collect(dev, &mut collector);
+        let p = collector.progress();
+        match calibrate::<f32, _>(collector.samples(), &Config::default()) {
+            Ok(fit) => {
+                log_fit(&fit);
+                let worst = max_residual(&fit.calibration, collector.samples());
+                if worst <= MAX_RESIDUAL {
+                    return fit.calibration;
+                }
+                error!(
+                    "attempt {=u32}: a collected sample lies {=f32} off the calibrated sphere (limit {=f32}): the collection was disturbed; not using this calibration",
+                    attempt, worst, MAX_RESIDUAL
+                );
+            }
+            Err(e) => error!(
+                "attempt {=u32}: calibration refused: {} ({=usize} samples, {=usize}/{=usize} cells)",
+                attempt,
+                e,
+                p.samples,
+                p.cells_visited,
+                p.cells
+            ),
+        }
+        if attempt < COLLECT_ATTEMPTS {
+            info!("clearing the samples and collecting again");
+        }
+    }
+    error!("no calibration after {=u32} attempts", COLLECT_ATTEMPTS);
+    platform::exit(false)
+}
+
+/// One collection: offers every reading the fault monitor releases, logs
+/// the progress, and stops [`TOP_UP`] readings after ready, when full, or
+/// after [`MAX_READINGS`] readings.
+fn collect<I: I2c, D: DelayNs>(
+    dev: &mut Device<'_, '_, I, D>,
+    collector: &mut Collector<[i16; 3], CAPACITY>,
+) {
+    let mut reference = Reference::Unarmed;
+    let mut decile = 0u8;
+    let mut since_ready: Option<u32> = None;
+    let mut readings = 0u32;
+    while readings < MAX_READINGS {
+        readings += 1;
+        if let Some((raw, meta)) = dev.next_clean(&reference) {
+            if collector.offer(raw) == Offer::Accepted {
+                if meta.faulty {
+                    dev.log.leaked += 1;
+                }
+                reference = raw_reference(collector.samples(), collector.centre());
+                let p = collector.progress();
+                if since_ready.is_none() && p.percent / 10 > decile {
+                    decile = p.percent / 10;
+                    info!(
+                        "collected {=usize} samples, {=usize}/{=usize} cells, {=u8} %",
+                        p.samples, p.cells_visited, p.cells, p.percent
+                    );
+                }
+                if p.ready && since_ready.is_none() {
+                    info!(
+                        "collector ready after {=u32} readings; collecting on for {=u32} readings or until full ({=usize} samples)",
+                        readings,
+                        TOP_UP,
+                        CAPACITY
+                    );
+                    since_ready = Some(0);
+                } else if since_ready.is_some() && p.samples.is_multiple_of(50) {
+                    info!(
+                        "collected {=usize} samples, {=usize}/{=usize} cells",
+                        p.samples, p.cells_visited, p.cells
+                    );
+                }
+            }
+        }
+        if dev.monitor.long_disturbance(LONG_DISTURBANCE) {
+            warn!(
+                "field disturbed for {=u32} readings: the environment changed; restarting the collection",
+                LONG_DISTURBANCE
+            );
+            dev.log.restarts += 1;
+            collector.clear();
+            reference = Reference::Unarmed;
+            decile = 0;
+            since_ready = None;
+        }
+        if collector.len() == CAPACITY {
+            break;
+        }
+        if let Some(n) = since_ready.as_mut() {
+            *n += 1;
+            if *n >= TOP_UP {
+                break;
             }
         }
     }
+    dev.monitor.end_phase();
+    let p = collector.progress();
+    info!(
+        "collection done after {=u32} readings: {=usize} samples, {=usize}/{=usize} cells, ready {=bool}",
+        readings, p.samples, p.cells_visited, CELLS, p.ready
+    );
+}
 
-    // --- calibration, on the chip
-    let fit = match calibrate::<f32, _>(store.as_slice(), &Config::default()) {
-        Ok(fit) => fit,
-        Err(e) => {
-            error!("calibration failed: {}", e);
-            platform::exit(false)
-        }
-    };
-    let cal = fit.calibration;
+/// Largest `| |W (y - b)| - 1 |` over `samples`.
+fn max_residual(cal: &Calibration<f32>, samples: &[[i16; 3]]) -> f32 {
+    samples.iter().fold(0.0f32, |m, s| {
+        m.max(libm::fabsf(cal.apply(s.map(f32::from)).norm() - 1.0))
+    })
+}
+
+/// Logs a calibration, its quality figures and its warnings.
+fn log_fit(fit: &Fit<f32>) {
+    let cal = &fit.calibration;
+    let r = &fit.report;
     let (b, w, rho) = (cal.hard_iron(), cal.soft_iron(), cal.field_strength());
     info!(
         "calibration (ADC2, f32): {} iterations, {} samples used, {} dropped, radial RMS {=f32}",
-        fit.report.iterations,
-        fit.report.samples_used,
-        fit.report.samples_dropped,
-        fit.report.radial_rms
+        r.iterations, r.samples_used, r.samples_dropped, r.radial_rms
     );
     info!("  b   = [{=f32}, {=f32}, {=f32}] counts", b.x, b.y, b.z);
-    for r in 0..3 {
+    for i in 0..3 {
         info!(
             "  W[{}] = [{=f32}, {=f32}, {=f32}] 1/counts",
-            r,
-            w[(r, 0)],
-            w[(r, 1)],
-            w[(r, 2)]
+            i,
+            w[(i, 0)],
+            w[(i, 1)],
+            w[(i, 2)]
         );
     }
     info!(
@@ -185,25 +528,79 @@ fn main() -> ! {
         rho,
         rho * 0.15 // 150 nT per count
     );
+    let q = &r.quality;
+    info!(
+        "  quality: flatness {=f32}, quadric gap {=f32}, distortion {=f32}, coverage {=f32}, Gram condition {=f32}",
+        q.flatness, q.quadric_gap, q.distortion, q.coverage, q.gram_condition
+    );
+    if r.warnings.is_empty() {
+        info!("  warnings: none");
+    }
+    for w in r.warnings.iter() {
+        warn!("  warning: {} ({=str})", w, w.name());
+    }
+}
 
-    // --- calibrated heading over a level turn
-    bench.begin_level_turn(HEADINGS, SMOOTHING as u32);
+/// Stores `cal`, reloads it and compares; a failure is logged and the
+/// application goes on with the calibration in RAM.
+fn save(storage: &mut platform::CalibrationStorage, cal: &Calibration<f32>) {
+    if let Err(e) = storage::store(storage, cal) {
+        error!(
+            "storing the calibration failed: {}; using it until the next reset",
+            defmt::Debug2Format(&e)
+        );
+        return;
+    }
+    match storage::load(storage) {
+        Ok(back) if back == *cal => info!(
+            "stored the calibration ({=usize} bytes) in {=str}; reloaded and identical",
+            RECORD_LEN,
+            platform::STORAGE_NAME
+        ),
+        Ok(_) => error!("the stored calibration reloads with different values"),
+        Err(e) => error!("the stored calibration does not reload: {}", e),
+    }
+}
+
+/// A level compass swing: 36 stops of [`SMOOTHING`] readings, one smoothed
+/// calibrated heading per stop. The monitor releases a reading `GUARD`
+/// readings late, so the swing reads `GUARD` more, and a stop's heading is
+/// logged once its last reading is released. Returns the largest heading
+/// errors (calibrated, uncalibrated) against the truth, 0 without it.
+fn stream_headings<I: I2c, D: DelayNs>(
+    dev: &mut Device<'_, '_, I, D>,
+    cal: &Calibration<f32>,
+) -> (f32, f32) {
+    dev.bench.begin_level_turn(HEADINGS, SMOOTHING as u32);
+    let reference = Reference::Calibrated(cal);
     let mut smoothed = HeadingSmoother::<f32, SMOOTHING>::new();
     let mut smoothed_raw = HeadingSmoother::<f32, SMOOTHING>::new();
     let mut smoothed_truth = HeadingSmoother::<f32, SMOOTHING>::new();
     let mut heading_max_err_deg = 0.0f32;
     let mut raw_max_err_deg = 0.0f32;
-    for k in 0..HEADINGS {
-        for _ in 0..SMOOTHING {
-            let raw = read_sample(&mut sensor, delay).map(f32::from);
+    let mut used = 0u32;
+    let per_stop = SMOOTHING as u32;
+    for done in 1..=HEADINGS * per_stop + GUARD {
+        if let Some((raw, meta)) = dev.next_clean(&reference) {
+            if meta.faulty {
+                dev.log.leaked += 1;
+            }
+            let raw = raw.map(f32::from);
             smoothed.push(heading_deg(&cal.apply(raw)));
             // The same reading without calibration, for contrast.
             smoothed_raw.push(heading_deg(&Vector3::from(raw)));
-            if let Some(t) = bench.true_heading_deg() {
+            if let Some(t) = meta.true_heading {
                 smoothed_truth.push(t);
             }
+            used += 1;
         }
-        let Some(h) = smoothed.mean() else {
+        if done <= GUARD || !(done - GUARD).is_multiple_of(per_stop) {
+            continue;
+        }
+        let k = (done - GUARD) / per_stop - 1;
+        let readings = core::mem::take(&mut used);
+        let Some(h) = smoothed.mean().filter(|_| readings > 0) else {
+            warn!("heading {=u32:02}: no clean reading at this stop", k);
             continue;
         };
         let h = wrap_360(h);
@@ -222,36 +619,43 @@ fn main() -> ! {
             _ => info!("heading {=u32:02}: {=f32} deg", k, h),
         }
     }
+    dev.monitor.end_phase();
+    (heading_max_err_deg, raw_max_err_deg)
+}
 
-    // --- self-check against the truth (only the simulator knows it)
-    let Some(truth) = bench.truth() else {
-        info!("done");
-        platform::exit(true)
-    };
-    let Some((e_b, e_s)) = parameter_errors(&cal, &truth) else {
-        error!("could not compare with the truth (singular matrix)");
-        platform::exit(false)
-    };
-    info!(
-        "truth: b = [{=f32}, {=f32}, {=f32}], rho = {=f32} counts; uncalibrated heading max error {=f32} deg",
-        truth.hard_iron.x,
-        truth.hard_iron.y,
-        truth.hard_iron.z,
-        truth.field_strength,
-        raw_max_err_deg
-    );
-    let ok = e_b < E_B_MAX && e_s < E_S_MAX && heading_max_err_deg < HEADING_MAX_ERR_DEG;
-    if !ok {
+/// The simulator's check of the fault handling: every injected episode seen
+/// once and handled, no other I2C error, no faulty sample used; in the
+/// fault run every class must have been injected at least once (in the
+/// clean run, nothing is injected and nothing may be seen).
+fn check_faults(log: &FaultLog, injected: [u32; 4]) -> bool {
+    let counts = [log.nack, log.stuck, log.saturated, log.disturbance];
+    let names = ["nack", "stuck", "saturated", "disturbance"];
+    let mut ok = log.leaked == 0 && log.bus_errors.seen == 0;
+    for ((count, injected), name) in counts.iter().zip(injected).zip(names) {
+        let class_ok = count.seen == injected
+            && count.handled == count.seen
+            && (injected > 0 || !cfg!(feature = "faults"));
+        if !class_ok {
+            error!(
+                "fault class {=str}: injected {=u32}, seen {=u32}, handled {=u32}",
+                name, injected, count.seen, count.handled
+            );
+        }
+        ok &= class_ok;
+    }
+    if log.leaked > 0 {
         error!(
-            "errors exceed the bounds e_b < {=f32}, e_S < {=f32}, heading < {=f32} deg",
-            E_B_MAX, E_S_MAX, HEADING_MAX_ERR_DEG
+            "{=u32} samples the simulator made faulty reached a calibration or a heading",
+            log.leaked
         );
     }
-    info!(
-        "calibrated: e_b={=f32} e_S={=f32} heading_max_err_deg={=f32}",
-        e_b, e_s, heading_max_err_deg
-    );
-    platform::exit(ok)
+    if cfg!(feature = "faults") || !ok {
+        info!(
+            "simulator: injected nack={=u32} stuck={=u32} saturated={=u32} disturbance={=u32}; faulty samples used: {=u32}",
+            injected[0], injected[1], injected[2], injected[3], log.leaked
+        );
+    }
+    ok
 }
 
 /// Errors of a calibration against the truth, both relative to the true

@@ -47,6 +47,30 @@
 //!   `stops` headings `psi_j = offset + j 360 / stops` for `dwell` samples
 //!   each; then `h = (cos dip cos psi, -cos dip sin psi, sin dip)` and the
 //!   level heading is `atan2(-h_y, h_x) = psi`.
+//!
+//! # Faults
+//!
+//! A [`Scenario`] carries a [`Faults`] schedule ([`Faults::NONE`] in the
+//! clean run, [`Faults::RUN`] in the fault run). The physics here decides
+//! *when* a sample is faulty and adds the field of the physical faults:
+//!
+//! - saturation: a strong field (beyond the +-49 G range) for a few
+//!   samples; every reading is clipped at +-32767 counts, as the
+//!   sensor's 16-bit output is;
+//! - disturbance: a magnet passing, a field added with the profile
+//!   `peak sin^2(pi (t + 1/2) / len)` over the `len` samples of its window
+//!   (smooth rise and fall, like a dipole approaching and leaving);
+//! - stuck output: only marked here ([`Injected::stuck`]); the register
+//!   model ([`crate::sim_sensor`]) then leaves the output registers
+//!   unchanged while STATUS still reports new data.
+//!
+//! I2C NACK bursts are purely a bus matter and live in the register model.
+//! The windows count samples from the start of a motion phase, so every
+//! collection (a [`Motion::Sweep`]) and every compass swing
+//! ([`Motion::LevelTurn`]) meets the same faults. Each reading says which
+//! faults it carries ([`Reading::injected`]), and the simulator counts the
+//! episodes it injected ([`Simulator::injected`]), so the fault run can
+//! check the firmware against the truth.
 
 use core::f64::consts::PI;
 
@@ -72,6 +96,8 @@ pub struct Scenario {
     pub sweep_samples: u32,
     /// PRNG seed.
     pub seed: u64,
+    /// Faults to inject ([`Faults::NONE`]: a clean sensor).
+    pub faults: Faults,
 }
 
 impl Scenario {
@@ -89,7 +115,152 @@ impl Scenario {
         noise: 2.5,
         sweep_samples: 600,
         seed: 0x6d61_672d_6361_6c21,
+        faults: Faults::NONE,
     };
+}
+
+/// A stretch of consecutive samples of a motion phase: the samples
+/// `start..start + len`, counted from the start of the phase (0 is the
+/// first sample after [`Simulator::set_motion`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    /// First sample of the stretch.
+    pub start: u32,
+    /// Samples in the stretch.
+    pub len: u32,
+}
+
+impl Window {
+    /// Position of sample `k` in the window, if it is in it.
+    pub fn position(&self, k: u32) -> Option<u32> {
+        k.checked_sub(self.start).filter(|&t| t < self.len)
+    }
+}
+
+/// The faults of one motion phase (`None`: not injected).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PhaseFaults {
+    /// Output registers frozen (see [`crate::sim_sensor`]).
+    pub stuck: Option<Window>,
+    /// A field beyond the range: the output clips at +-32767.
+    pub saturation: Option<Window>,
+    /// A magnet passing.
+    pub disturbance: Option<Window>,
+}
+
+impl PhaseFaults {
+    /// No fault.
+    pub const NONE: PhaseFaults = PhaseFaults {
+        stuck: None,
+        saturation: None,
+        disturbance: None,
+    };
+}
+
+/// Sensor faults to inject.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Faults {
+    /// I2C NACK bursts: after every `nack_every` bus transactions answered,
+    /// the next transactions are NACKed (0: never). Implemented by the
+    /// register model.
+    pub nack_every: u32,
+    /// Bursts NACK 1, 2, .., `nack_burst_max` consecutive transactions in
+    /// turn.
+    pub nack_burst_max: u32,
+    /// Faults during a [`Motion::Sweep`] (each collection).
+    pub sweep: PhaseFaults,
+    /// Faults during a [`Motion::LevelTurn`] (each compass swing).
+    pub level_turn: PhaseFaults,
+    /// Field added during a saturation window, counts.
+    pub saturation_field: [f64; 3],
+    /// Peak field of a disturbance, counts.
+    pub disturbance_peak: [f64; 3],
+}
+
+impl Faults {
+    /// A clean sensor.
+    pub const NONE: Faults = Faults {
+        nack_every: 0,
+        nack_burst_max: 0,
+        sweep: PhaseFaults::NONE,
+        level_turn: PhaseFaults::NONE,
+        saturation_field: [0.0; 3],
+        disturbance_peak: [0.0; 3],
+    };
+
+    /// The fault run (`--features qemu,faults`): every class, in every
+    /// collection and every compass swing.
+    ///
+    /// - NACK bursts of 1 to 4 transactions after every 997 answered (a
+    ///   prime, so the bursts hit status polls, output reads and
+    ///   configuration writes alike; about 6 transactions a sample at
+    ///   20 Hz, so a burst every 8 s or so);
+    /// - stuck output for 25 samples (1.25 s) of each collection and 20 of
+    ///   each swing;
+    /// - saturation for 6 samples: 45000 counts (6.8 mT, a magnet touching
+    ///   the board) on x, beyond the +-32767 rail;
+    /// - a magnet passing within a few cm: peak 1500 counts (225 uT, about
+    ///   5 times the Earth's field) over 40 samples (2 s) of a collection
+    ///   and 30 of a swing.
+    ///
+    /// The windows do not overlap and lie well inside the phases: a
+    /// collection takes 600-700 samples, a swing 550.
+    pub const RUN: Faults = Faults {
+        nack_every: 997,
+        nack_burst_max: 4,
+        sweep: PhaseFaults {
+            stuck: Some(Window { start: 60, len: 25 }),
+            saturation: Some(Window { start: 130, len: 6 }),
+            disturbance: Some(Window {
+                start: 200,
+                len: 40,
+            }),
+        },
+        level_turn: PhaseFaults {
+            stuck: Some(Window {
+                start: 100,
+                len: 20,
+            }),
+            saturation: Some(Window { start: 250, len: 6 }),
+            disturbance: Some(Window {
+                start: 380,
+                len: 30,
+            }),
+        },
+        saturation_field: [45_000.0, 0.0, -4_000.0],
+        disturbance_peak: [900.0, -720.0, 960.0],
+    };
+}
+
+/// The faults a sample carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Injected {
+    /// The output registers were not updated with this sample.
+    pub stuck: bool,
+    /// A field beyond the range was added.
+    pub saturated: bool,
+    /// A disturbance field was added.
+    pub disturbed: bool,
+}
+
+impl Injected {
+    /// Whether any fault is present.
+    pub fn any(&self) -> bool {
+        self.stuck || self.saturated || self.disturbed
+    }
+}
+
+/// Fault episodes injected so far, per class.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct InjectedCounts {
+    /// NACK bursts (counted by the register model).
+    pub nack: u32,
+    /// Stuck-output windows.
+    pub stuck: u32,
+    /// Saturation windows.
+    pub saturated: u32,
+    /// Disturbance windows.
+    pub disturbance: u32,
 }
 
 /// What the simulated sensor is doing.
@@ -118,6 +289,8 @@ pub struct Reading {
     /// The true level heading `atan2(-h_y, h_x)` in degrees, `[0, 360)`
     /// (meaningful during [`Motion::LevelTurn`]).
     pub heading_deg: f64,
+    /// The faults injected into this sample.
+    pub injected: Injected,
 }
 
 /// SplitMix64 (Steele, Lea, Flood 2014): a tiny, seedable, well-mixed PRNG.
@@ -210,6 +383,8 @@ pub struct Simulator {
     step: u32,
     /// Longitude of the sweep spiral, radians.
     spiral_phi: f64,
+    /// Fault episodes injected.
+    injected: InjectedCounts,
 }
 
 impl Simulator {
@@ -232,6 +407,7 @@ impl Simulator {
             motion: Motion::Sweep,
             step: 0,
             spiral_phi: 0.0,
+            injected: InjectedCounts::default(),
         }
     }
 
@@ -304,21 +480,63 @@ impl Simulator {
         }
     }
 
+    /// Fault episodes injected so far (stuck, saturation, disturbance; the
+    /// NACK count is the register model's).
+    pub fn injected(&self) -> InjectedCounts {
+        self.injected
+    }
+
+    /// The faults of sample `k` of the current phase and the field they add,
+    /// counts; counts a window's episode at its first sample.
+    fn faults_at(&mut self, k: u32) -> (Injected, [f64; 3]) {
+        let f = &self.scenario.faults;
+        let phase = match self.motion {
+            Motion::Sweep => &f.sweep,
+            Motion::LevelTurn { .. } => &f.level_turn,
+        };
+        let mut injected = Injected::default();
+        let mut field = [0.0; 3];
+        if let Some(t) = phase.stuck.and_then(|w| w.position(k)) {
+            injected.stuck = true;
+            self.injected.stuck += u32::from(t == 0);
+        }
+        if let Some(t) = phase.saturation.and_then(|w| w.position(k)) {
+            injected.saturated = true;
+            self.injected.saturated += u32::from(t == 0);
+            field = f.saturation_field;
+        }
+        if let Some((t, w)) = phase
+            .disturbance
+            .and_then(|w| w.position(k).map(|t| (t, w)))
+        {
+            injected.disturbed = true;
+            self.injected.disturbance += u32::from(t == 0);
+            let s = libm::sin(PI * (f64::from(t) + 0.5) / f64::from(w.len));
+            for (a, p) in field.iter_mut().zip(f.disturbance_peak) {
+                *a += p * s * s;
+            }
+        }
+        (injected, field)
+    }
+
     /// The next sample.
     pub fn next_reading(&mut self) -> Reading {
+        let k = self.step;
         let (h, heading_deg) = self.next_direction();
+        let (injected, extra) = self.faults_at(k);
         let th = mat_vec(&self.soft_iron, &h);
         let b = self.scenario.hard_iron;
         let mut counts = [0i16; 3];
         for (i, c) in counts.iter_mut().enumerate() {
-            let y = th[i] + b[i] + self.scenario.noise * self.noise.sample();
-            // `as` saturates: the sensor's output clips at the i16 range.
-            *c = libm::round(y) as i16;
+            let y = th[i] + b[i] + extra[i] + self.scenario.noise * self.noise.sample();
+            // The sensor's output clips at +-32767 counts.
+            *c = libm::round(y).clamp(-32767.0, 32767.0) as i16;
         }
         Reading {
             counts,
             direction: h,
             heading_deg,
+            injected,
         }
     }
 }

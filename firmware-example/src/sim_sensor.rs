@@ -44,15 +44,42 @@
 //! a firmware that never starts the magnetometer would poll forever (QEMU's
 //! timeout then fails the run). Reading an axis' high byte clears its data
 //! ready and overrun bits, and Zyxda/Zyxor once all three are read.
+//!
+//! # Faults (`--features faults`)
+//!
+//! With [`Faults::RUN`] in the scenario the bus and the registers misbehave
+//! on the simulator's schedule ([`crate::sim`]):
+//!
+//! - NACK bursts: after every `nack_every` transactions answered, the next
+//!   1, 2, .., `nack_burst_max` transactions (in turn) are refused with an
+//!   address NACK, before any register is touched (no side effect, so a
+//!   refused STATUS_REG_M read does not advance the clock);
+//! - stuck output: a sample marked stuck is not written to the output
+//!   registers, yet STATUS_REG_M reports new data as usual, so the driver
+//!   reads the previous sample again.
+//!
+//! # Flash stand-in
+//!
+//! QEMU's mps2-an386 has no nRF52 NVMC (its "flash" is plain SRAM and there
+//! is no flash controller), so the calibration record goes to [`SimFlash`]:
+//! one 4 KiB page in RAM with NOR-flash semantics (erase sets every byte to
+//! 0xFF, a write can only clear bits, words of 4 bytes), implementing the
+//! same `embedded-storage` traits as the board's `Nvmc`. It lives in
+//! [`Hardware`] for the whole run, so it survives the simulated reboots of
+//! the application (see `src/main.rs`).
 
 use core::cell::RefCell;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{self, ErrorKind, NoAcknowledgeSource, Operation};
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
 
-use crate::sim::{Motion, Reading, Scenario, Simulator};
-use crate::Truth;
+use crate::sim::{Faults, InjectedCounts, Motion, Reading, Scenario, Simulator};
+use crate::storage::FlashStorage;
+use crate::{BootOutcome, Truth};
 
 /// What this build runs on, for the log.
 pub const NAME: &str = "QEMU mps2-an386, simulated LSM303AGR";
@@ -100,6 +127,9 @@ const AXIS_DA: [u8; 3] = [0b001, 0b010, 0b100];
 pub enum SimI2cError {
     /// No device at this address.
     NoDevice(u8),
+    /// The device did not acknowledge its address: a NACK burst of the
+    /// fault schedule (a busy or glitching bus).
+    Busy(u8),
     /// The device NACKed: unmodelled register, write to a read-only
     /// register, or a transfer that does not start with the sub-address.
     Nack {
@@ -113,7 +143,9 @@ pub enum SimI2cError {
 impl i2c::Error for SimI2cError {
     fn kind(&self) -> ErrorKind {
         match self {
-            SimI2cError::NoDevice(_) => ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address),
+            SimI2cError::NoDevice(_) | SimI2cError::Busy(_) => {
+                ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address)
+            }
             SimI2cError::Nack { .. } => ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data),
         }
     }
@@ -133,6 +165,12 @@ pub struct SimLsm303agr {
     ticks: u32,
     /// Truth of the latched sample.
     latched: Option<Reading>,
+    /// Bus transactions answered since the last NACK burst.
+    answered: u32,
+    /// Transactions still to NACK in the current burst.
+    nack_left: u32,
+    /// NACK bursts injected.
+    nack_bursts: u32,
 }
 
 impl SimLsm303agr {
@@ -146,6 +184,9 @@ impl SimLsm303agr {
             out_m: [0; 6],
             ticks: 0,
             latched: None,
+            answered: 0,
+            nack_left: 0,
+            nack_bursts: 0,
         };
         dev.reset_accel();
         dev.reset_mag();
@@ -176,6 +217,36 @@ impl SimLsm303agr {
         self.latched.as_ref()
     }
 
+    /// Whether the bus NACKs this transaction (a NACK burst of the fault
+    /// schedule); counts the transaction.
+    fn nack_now(&mut self) -> bool {
+        let f = self.sim.scenario().faults;
+        if self.nack_left > 0 {
+            self.nack_left -= 1;
+            return true;
+        }
+        if f.nack_every == 0 || f.nack_burst_max == 0 {
+            return false;
+        }
+        self.answered += 1;
+        if self.answered <= f.nack_every {
+            return false;
+        }
+        // This transaction starts a burst of 1, 2, .., max in turn.
+        self.answered = 0;
+        self.nack_left = self.nack_bursts % f.nack_burst_max;
+        self.nack_bursts += 1;
+        true
+    }
+
+    /// Fault episodes injected so far.
+    pub fn injected(&self) -> InjectedCounts {
+        InjectedCounts {
+            nack: self.nack_bursts,
+            ..self.sim.injected()
+        }
+    }
+
     /// Polls per sample at the configured output data rate (100 Hz / ODR).
     fn ticks_per_sample(&self) -> u32 {
         match (self.mag_cfg[0] >> 2) & 0b11 {
@@ -199,8 +270,11 @@ impl SimLsm303agr {
         }
         self.ticks = 0;
         let reading = self.sim.next_reading();
-        for (i, c) in reading.counts.iter().enumerate() {
-            self.out_m[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+        // A stuck output keeps the previous sample; STATUS still says new.
+        if !reading.injected.stuck {
+            for (i, c) in reading.counts.iter().enumerate() {
+                self.out_m[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+            }
         }
         // A sample replacing an unread one is an overrun.
         let unread = self.status_m & 0b111;
@@ -312,6 +386,9 @@ impl i2c::I2c for SimI2c<'_> {
         if address != ACCEL_ADDR && address != MAG_ADDR {
             return Err(SimI2cError::NoDevice(address));
         }
+        if self.dev.borrow_mut().nack_now() {
+            return Err(SimI2cError::Busy(address));
+        }
         // Register pointer and auto-increment, set by the sub-address.
         let mut pointer: Option<(u8, bool)> = None;
         for op in operations {
@@ -361,32 +438,169 @@ impl DelayNs for NoDelay {
     fn delay_ns(&mut self, _ns: u32) {}
 }
 
+/// Size of the flash stand-in: one nRF52833 page.
+pub const FLASH_PAGE: usize = 4096;
+
+/// An error of the flash stand-in (the same cases as the NVMC's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum SimFlashError {
+    /// Outside the page.
+    OutOfBounds,
+    /// Not aligned to the erase or write size.
+    Unaligned,
+}
+
+impl NorFlashError for SimFlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            SimFlashError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            SimFlashError::Unaligned => NorFlashErrorKind::NotAligned,
+        }
+    }
+}
+
+/// One page of NOR flash in RAM: QEMU's stand-in for the board's NVMC page
+/// (see the module documentation). Starts erased (all 0xFF).
+pub struct SimFlash {
+    bytes: [u8; FLASH_PAGE],
+    erases: u32,
+}
+
+impl SimFlash {
+    /// An erased page.
+    pub const fn new() -> Self {
+        Self {
+            bytes: [0xFF; FLASH_PAGE],
+            erases: 0,
+        }
+    }
+
+    /// Flips bit `bit` of byte `offset`, as a retention error or a torn
+    /// write would (test hook; not reachable through the flash traits).
+    pub fn corrupt(&mut self, offset: usize, bit: u8) {
+        if let Some(b) = self.bytes.get_mut(offset) {
+            *b ^= 1 << (bit % 8);
+        }
+    }
+
+    /// Page erases so far.
+    pub fn erases(&self) -> u32 {
+        self.erases
+    }
+
+    fn range(&self, offset: u32, len: usize) -> Result<core::ops::Range<usize>, SimFlashError> {
+        let start = offset as usize;
+        let end = start.checked_add(len).ok_or(SimFlashError::OutOfBounds)?;
+        if end > FLASH_PAGE {
+            return Err(SimFlashError::OutOfBounds);
+        }
+        Ok(start..end)
+    }
+}
+
+impl Default for SimFlash {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ErrorType for SimFlash {
+    type Error = SimFlashError;
+}
+
+impl ReadNorFlash for SimFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let r = self.range(offset, bytes.len())?;
+        bytes.copy_from_slice(&self.bytes[r]);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        FLASH_PAGE
+    }
+}
+
+impl NorFlash for SimFlash {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = FLASH_PAGE;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        if from > to {
+            return Err(SimFlashError::OutOfBounds);
+        }
+        let r = self.range(from, (to - from) as usize)?;
+        if r.start % Self::ERASE_SIZE != 0 || r.end % Self::ERASE_SIZE != 0 {
+            return Err(SimFlashError::Unaligned);
+        }
+        self.bytes[r].fill(0xFF);
+        self.erases += 1;
+        Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let r = self.range(offset, bytes.len())?;
+        if r.start % Self::WRITE_SIZE != 0 || r.len() % Self::WRITE_SIZE != 0 {
+            return Err(SimFlashError::Unaligned);
+        }
+        // NOR flash: programming only clears bits.
+        for (cell, b) in self.bytes[r].iter_mut().zip(bytes) {
+            *cell &= *b;
+        }
+        Ok(())
+    }
+}
+
+/// The calibration storage of this build: the record at the start of the
+/// flash stand-in.
+pub type CalibrationStorage = FlashStorage<SimFlash>;
+
+/// Where the calibration is stored, for the log.
+pub const STORAGE_NAME: &str = "flash stand-in (4 KiB of RAM; QEMU has no NVMC)";
+
 /// The simulated hardware.
 pub struct Hardware {
     sensor: RefCell<SimLsm303agr>,
     delay: NoDelay,
+    storage: CalibrationStorage,
 }
 
 impl Hardware {
-    /// The sensor in its power-on state, simulating [`Scenario::DEFAULT`].
+    /// The sensor in its power-on state, simulating [`Scenario::DEFAULT`]
+    /// (with [`Faults::RUN`] in the fault run), and an erased flash page.
     pub fn take() -> Self {
         // Keep the marker in the ELF for `runner.sh`.
         core::hint::black_box(&QEMU_MARKER);
+        let faults = if cfg!(feature = "faults") {
+            Faults::RUN
+        } else {
+            Faults::NONE
+        };
         Self {
-            sensor: RefCell::new(SimLsm303agr::new(Scenario::DEFAULT)),
+            sensor: RefCell::new(SimLsm303agr::new(Scenario {
+                faults,
+                ..Scenario::DEFAULT
+            })),
             delay: NoDelay,
+            storage: FlashStorage::new(SimFlash::new(), 0),
         }
     }
 
-    /// The I2C bus for the driver, its delay, and the test bench.
-    pub fn split(&mut self) -> (SimI2c<'_>, &mut NoDelay, Bench<'_>) {
+    /// The I2C bus for the driver, its delay, the test bench, and the
+    /// calibration storage.
+    pub fn split(&mut self) -> (SimI2c<'_>, &mut NoDelay, Bench<'_>, &mut CalibrationStorage) {
         (
             SimI2c { dev: &self.sensor },
             &mut self.delay,
             Bench { dev: &self.sensor },
+            &mut self.storage,
         )
     }
 }
+
+/// Byte of the stored record flipped before the third boot: inside `W`.
+const CORRUPTED_BYTE: usize = 40;
 
 /// The simulator's side of the experiment: it moves the sensor and knows
 /// the truth.
@@ -426,9 +640,73 @@ impl Bench<'_> {
             });
     }
 
-    /// The raw counts in the output registers (the last sample latched).
+    /// Application boots in one run: 1, erased flash, nothing stored:
+    /// calibrate and store; 2, load the stored calibration and skip the
+    /// calibration; 3, after a bit of the record was flipped, the load
+    /// fails its checksum: calibrate and store again.
+    pub fn boots(&self) -> u32 {
+        3
+    }
+
+    /// Prepares boot `boot` (a simulated reset: the sensor, the bus and the
+    /// flash keep their state; the application starts from scratch).
+    pub fn before_boot(&mut self, boot: u32, storage: &mut CalibrationStorage) {
+        defmt::info!("--- boot {=u32} (simulated reset) ---", boot);
+        if boot == 3 {
+            defmt::info!(
+                "simulator: flipping bit 4 of byte {=usize} of the stored record",
+                CORRUPTED_BYTE
+            );
+            storage.flash_mut().corrupt(CORRUPTED_BYTE, 4);
+        }
+    }
+
+    /// Whether boot `boot` did what the flow requires: boot 1 finds the
+    /// page erased (`BadMagic`), boot 2 loads exactly what boot 1 stored,
+    /// boot 3 finds the corrupted record (`ChecksumMismatch`).
+    pub fn check_boot(
+        &self,
+        boot: u32,
+        outcome: BootOutcome,
+        calibration: &mag_cal_core::Calibration<f32>,
+        previous: Option<&mag_cal_core::Calibration<f32>>,
+    ) -> bool {
+        use crate::storage::LoadError::Record;
+        use mag_cal_core::Error;
+        let ok = match boot {
+            1 => outcome == BootOutcome::Calibrated(Record(Error::BadMagic)),
+            2 => outcome == BootOutcome::Loaded && previous == Some(calibration),
+            _ => outcome == BootOutcome::Calibrated(Record(Error::ChecksumMismatch)),
+        };
+        if !ok {
+            defmt::error!("boot {=u32}: unexpected outcome {}", boot, outcome);
+        }
+        ok
+    }
+
+    /// Whether the sample in the output registers carries an injected fault
+    /// (the truth the firmware must not let into a calibration).
+    pub fn latched_faulty(&self) -> bool {
+        self.dev
+            .borrow()
+            .latched()
+            .is_some_and(|r| r.injected.any())
+    }
+
+    /// Fault episodes injected so far, in the order of the summary line:
+    /// NACK bursts, stuck, saturated, disturbance (all 0 in the clean run).
+    pub fn injected(&self) -> Option<[u32; 4]> {
+        let c = self.dev.borrow().injected();
+        Some([c.nack, c.stuck, c.saturated, c.disturbance])
+    }
+
+    /// The raw counts in the output registers (the last sample latched,
+    /// or the one before it when the output is stuck).
     pub fn latched_counts(&self) -> Option<[i16; 3]> {
-        self.dev.borrow().latched().map(|r| r.counts)
+        let dev = self.dev.borrow();
+        dev.latched()?;
+        let o = &dev.out_m;
+        Some([0, 1, 2].map(|i| i16::from_le_bytes([o[2 * i], o[2 * i + 1]])))
     }
 
     /// The true level heading (degrees) of the last sample read.

@@ -5,7 +5,9 @@
 //! |---|---|
 //! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
-//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, and the QEMU run |
+//! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
+//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, the QEMU run and the fault run |
+//! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //!
 //! Each step prints what it runs; the first failing step ends the run with
 //! its exit status.
@@ -22,9 +24,11 @@ fn main() {
     let result = match args.first().map(String::as_str) {
         Some("setup") => setup(),
         Some("qemu") => setup().and_then(|()| qemu_demo()),
+        Some("qemu-faults") => setup().and_then(|()| qemu_faults()),
         Some("test") => setup().and_then(|()| test_all()),
+        Some("bench") => setup().and_then(|()| bench(&args[1..])),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|test>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|bench [--verify] [--host]>");
             exit(2);
         }
     };
@@ -123,6 +127,11 @@ fn setup() -> Result<(), String> {
 /// Builds and runs one firmware binary on QEMU (its runner ends with the
 /// firmware's semihosting exit status).
 fn run_on_qemu(bin: &str) -> Result<(), String> {
+    run_on_qemu_with(bin, "qemu")
+}
+
+/// [`run_on_qemu`] with the given feature list (which must include `qemu`).
+fn run_on_qemu_with(bin: &str, features: &str) -> Result<(), String> {
     run(
         &firmware_dir(),
         "cargo",
@@ -132,7 +141,7 @@ fn run_on_qemu(bin: &str) -> Result<(), String> {
             "--locked",
             "--no-default-features",
             "--features",
-            "qemu",
+            features,
             "--bin",
             bin,
         ],
@@ -145,11 +154,52 @@ fn qemu_demo() -> Result<(), String> {
     run_on_qemu("firmware-example")
 }
 
-/// Every test: host, on-target under QEMU, the board build, the QEMU demo.
+/// The firmware against a faulty simulated sensor (NACK bursts, stuck
+/// output, saturation, a passing magnet): ends with the line `faults: ..`
+/// and the `calibrated: ..` line, and exits non-zero when a fault class was
+/// not seen or not handled, a faulty sample was used, or the calibration
+/// misses the clean run's bounds.
+fn qemu_faults() -> Result<(), String> {
+    run_on_qemu_with("firmware-example", "qemu,faults")
+}
+
+/// Every test: host, on-target under QEMU, the board build, the QEMU demo,
+/// the fault run.
 fn test_all() -> Result<(), String> {
     run(&root(), "cargo", &["test", "--workspace", "--locked"])?;
     run_on_qemu("ontarget")?;
     let fw = firmware_dir();
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
-    qemu_demo()
+    qemu_demo()?;
+    qemu_faults()
+}
+
+/// The benchmarks: instruction counts and footprint on the emulated
+/// Cortex-M4F (`firmware-example/bench.sh`, which prints the `BENCH` and
+/// `FOOTPRINT` lines), and with `--host` the criterion benchmarks.
+fn bench(args: &[String]) -> Result<(), String> {
+    let mut verify = false;
+    let mut host = false;
+    for arg in args {
+        match arg.as_str() {
+            "--verify" => verify = true,
+            "--host" => host = true,
+            other => {
+                return Err(format!(
+                    "bench: unknown argument `{other}` (--verify, --host)"
+                ))
+            }
+        }
+    }
+    let script = firmware_dir().join("bench.sh");
+    let script = script.to_str().ok_or("bench.sh: path is not UTF-8")?;
+    let mut bench_args = vec![script, "all"];
+    if verify {
+        bench_args.push("--verify");
+    }
+    run(&firmware_dir(), "bash", &bench_args)?;
+    if host {
+        run(&root(), "cargo", &["bench", "--locked", "-p", "benches"])?;
+    }
+    Ok(())
 }

@@ -6,7 +6,22 @@
 //!   relative on `M = W^T W`, on `b / rho` and on `rho`;
 //! - the unmodified `lsm303agr` driver against the register-level simulated
 //!   sensor: identities, continuous mode, and every reading equal to the
-//!   counts the simulator latched.
+//!   counts the simulator latched;
+//! - persistence in `f32`: a calibration computed on the chip survives
+//!   `persist::to_bytes` / `from_bytes::<f32>` bit for bit, and the
+//!   firmware's flash storage (erase, program, read back) on the RAM
+//!   stand-in; every single-bit flip of the 92-byte record is detected
+//!   (`BadMagic` in the magic, `UnsupportedVersion` in the version byte,
+//!   `ChecksumMismatch` anywhere else), as are an erased page and a short
+//!   record;
+//! - the collector on simulated data: the spiral over the sphere gets ready
+//!   (not before 100 samples, within the 600-sample pass) and the core
+//!   accepts what it collected; a level turn (a plane) never gets ready and
+//!   the core refuses it;
+//! - the fault monitor on synthetic readings: a clean reading is released
+//!   `GUARD` readings late, exact repeats are excluded and declared stuck
+//!   at `STUCK_REPEATS`, a reading at the rail is saturated, and a
+//!   disturbance drops the readings held before it and the guard after it.
 //!
 //! Ends with the line `N passed, N failed` and exits through semihosting
 //! (status 0 only when nothing failed).
@@ -18,10 +33,17 @@
 
 use defmt::{error, info};
 use embedded_hal::i2c::I2c;
+use firmware_example::faults::{self, FaultLog, Monitor, Reference, Verdict, GUARD, STUCK_REPEATS};
 use firmware_example::platform;
+use firmware_example::sim::{Motion, Scenario, Simulator};
+use firmware_example::sim_sensor::SimFlash;
+use firmware_example::storage::{self, FlashStorage, LoadError, RECORD_LEN};
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
-use mag_cal_core::{calibrate, Config};
+use mag_cal_core::collector::{Collector, READY_SAMPLES};
+use mag_cal_core::nalgebra::{Matrix3, Vector3};
+use mag_cal_core::persist::{from_bytes, to_bytes};
+use mag_cal_core::{calibrate, Calibration, Config, Error};
 
 /// The generated vectors (not formatted by rustfmt, not edited by hand).
 mod vectors {
@@ -36,7 +58,7 @@ const DRIVER_SAMPLES: usize = 50;
 #[cortex_m_rt::entry]
 fn main() -> ! {
     let mut hardware = platform::Hardware::take();
-    let (i2c, delay, bench) = hardware.split();
+    let (i2c, delay, bench, _storage) = hardware.split();
     let mut passed = 0u32;
     let mut failed = 0u32;
     let mut record = |name: &str, ok: bool| {
@@ -54,6 +76,34 @@ fn main() -> ! {
     record(
         "lsm303agr driver on the simulated sensor",
         driver_on_simulator(i2c, delay, &bench),
+    );
+    record(
+        "persist: f32 round trip of a chip calibration",
+        persist_round_trip(),
+    );
+    record(
+        "persist: every bit flip of the record detected",
+        persist_corruption(),
+    );
+    record(
+        "storage: flash stand-in store, load, corrupt",
+        flash_storage(),
+    );
+    record(
+        "collector: ready on the sphere, core accepts",
+        collector_sphere(),
+    );
+    record(
+        "collector: never ready on a plane, core refuses",
+        collector_plane(),
+    );
+    record(
+        "faults: quarantine delay and exact repeats",
+        monitor_repeats(),
+    );
+    record(
+        "faults: saturation and disturbance guards",
+        monitor_guards(),
     );
     info!("{=u32} passed, {=u32} failed", passed, failed);
     platform::exit(failed == 0)
@@ -165,4 +215,320 @@ fn next_sample<I: I2c>(sensor: &mut Lsm303agr<I2cInterface<I>, MagContinuous>) -
         }
     }
     None
+}
+
+/// `n` readings of the simulated sensor (no faults) in `motion`.
+fn simulated<const N: usize>(motion: Motion) -> [[i16; 3]; N] {
+    let mut sim = Simulator::new(Scenario::DEFAULT);
+    sim.set_motion(motion);
+    core::array::from_fn(|_| sim.next_reading().counts)
+}
+
+/// A calibration computed on the chip from the simulated sphere.
+fn chip_calibration() -> Option<Calibration<f32>> {
+    let samples: [[i16; 3]; 600] = simulated(Motion::Sweep);
+    match calibrate::<f32, _>(&samples, &Config::default()) {
+        Ok(fit) => Some(fit.calibration),
+        Err(e) => {
+            error!("calibration of the simulated sphere failed: {}", e);
+            None
+        }
+    }
+}
+
+/// to_bytes / from_bytes::<f32> keep every value bit for bit.
+fn persist_round_trip() -> bool {
+    let Some(cal) = chip_calibration() else {
+        return false;
+    };
+    let bytes = to_bytes(&cal);
+    let back = match from_bytes::<f32>(&bytes) {
+        Ok(back) => back,
+        Err(e) => {
+            error!("from_bytes refused a fresh record: {}", e);
+            return false;
+        }
+    };
+    let same_bits = |a: &Matrix3<f32>, b: &Matrix3<f32>| {
+        a.iter()
+            .zip(b.iter())
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+    };
+    let same_b = |a: Vector3<f32>, b: Vector3<f32>| {
+        a.iter()
+            .zip(b.iter())
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+    };
+    let ok = back == cal
+        && same_bits(&back.soft_iron(), &cal.soft_iron())
+        && same_b(back.hard_iron(), cal.hard_iron())
+        && back.field_strength().to_bits() == cal.field_strength().to_bits()
+        && to_bytes(&back) == bytes;
+    if !ok {
+        error!("round trip changed the calibration");
+    }
+    ok
+}
+
+/// Every single-bit flip is refused with the error of its field; an erased
+/// page and a short record too.
+fn persist_corruption() -> bool {
+    let Some(cal) = chip_calibration() else {
+        return false;
+    };
+    let good = to_bytes(&cal);
+    let mut ok = true;
+    for byte in 0..RECORD_LEN {
+        let want = match byte {
+            0..=3 => Error::BadMagic,
+            4 => Error::UnsupportedVersion {
+                found: good[4] ^ 0x01,
+            },
+            _ => Error::ChecksumMismatch,
+        };
+        for bit in 0..8u8 {
+            let mut bad = good;
+            bad[byte] ^= 1 << bit;
+            let got = from_bytes::<f32>(&bad);
+            let expected = match want {
+                Error::UnsupportedVersion { .. } => Error::UnsupportedVersion { found: bad[4] },
+                other => other,
+            };
+            if got != Err(expected) {
+                error!(
+                    "flipping bit {=u8} of byte {=usize}: {}, expected {}",
+                    bit,
+                    byte,
+                    got.err(),
+                    expected
+                );
+                ok = false;
+            }
+        }
+    }
+    ok &= from_bytes::<f32>(&[0xFF; RECORD_LEN]) == Err(Error::BadMagic);
+    ok &= from_bytes::<f32>(&good[..RECORD_LEN - 1]) == Err(Error::Truncated);
+    ok
+}
+
+/// The firmware's storage on the NOR-flash stand-in: an erased page loads
+/// as BadMagic, a stored calibration reloads identical (and the rest of the
+/// page stays erased), a flipped bit loads as ChecksumMismatch, a second
+/// store erases and rewrites.
+fn flash_storage() -> bool {
+    let Some(cal) = chip_calibration() else {
+        return false;
+    };
+    let mut st = FlashStorage::new(SimFlash::new(), 0);
+    let mut ok = storage::load(&mut st) == Err(LoadError::Record(Error::BadMagic));
+    ok &= storage::store(&mut st, &cal).is_ok();
+    ok &= storage::load(&mut st) == Ok(cal);
+    let mut rest = [0u8; 64];
+    ok &= embedded_storage::nor_flash::ReadNorFlash::read(st.flash_mut(), 4032, &mut rest).is_ok()
+        && rest.iter().all(|&b| b == 0xFF);
+    st.flash_mut().corrupt(60, 2);
+    ok &= storage::load(&mut st) == Err(LoadError::Record(Error::ChecksumMismatch));
+    ok &= storage::store(&mut st, &cal).is_ok() && storage::load(&mut st) == Ok(cal);
+    ok &= st.flash_mut().erases() == 2;
+    if !ok {
+        error!("flash storage misbehaved");
+    }
+    ok
+}
+
+/// The simulated spiral gets the collector ready within one pass, not
+/// before READY_SAMPLES, and the core calibrates what it collected.
+fn collector_sphere() -> bool {
+    let mut sim = Simulator::new(Scenario::DEFAULT);
+    let mut c: Collector<[i16; 3], 600> = Collector::default();
+    let mut offers = 0;
+    while !c.is_ready() && offers < 600 {
+        let _ = c.offer(sim.next_reading().counts);
+        offers += 1;
+        if c.len() < READY_SAMPLES && c.is_ready() {
+            error!("ready with only {=usize} samples", c.len());
+            return false;
+        }
+    }
+    let p = c.progress();
+    info!(
+        "collector: ready {=bool} after {=usize} offers, {=usize} samples, {=usize}/{=usize} cells, {=u8} %",
+        p.ready, offers, p.samples, p.cells_visited, p.cells, p.percent
+    );
+    if !p.ready || p.percent != 100 {
+        return false;
+    }
+    match calibrate::<f32, _>(c.samples(), &Config::default()) {
+        Ok(fit) => {
+            let e_b =
+                (fit.calibration.hard_iron() - Vector3::new(180.0, -95.0, 240.0)).norm() / 320.0;
+            info!("collector: calibration at ready, e_b = {=f32}", e_b);
+            e_b < 0.02
+        }
+        Err(e) => {
+            error!("the core refused the ready collection: {}", e);
+            false
+        }
+    }
+}
+
+/// A level compass swing (the field direction on a cone: a plane of raw
+/// readings) never gets ready, and the core refuses it.
+fn collector_plane() -> bool {
+    let samples: [[i16; 3]; 600] = simulated(Motion::LevelTurn {
+        stops: 600,
+        dwell: 1,
+        offset_deg: 0,
+    });
+    let mut c: Collector<[i16; 3], 600> = Collector::default();
+    for s in samples {
+        let _ = c.offer(s);
+        if c.is_ready() {
+            error!("a plane made the collector ready");
+            return false;
+        }
+    }
+    let p = c.progress();
+    info!(
+        "collector on a plane: {=usize} samples, {=usize}/{=usize} cells, {=u8} %",
+        p.samples, p.cells_visited, p.cells, p.percent
+    );
+    match calibrate::<f32, _>(c.samples(), &Config::default()) {
+        Ok(_) => {
+            error!("the core calibrated a plane");
+            false
+        }
+        Err(e) => {
+            info!("collector on a plane: core refuses with {}", e);
+            true
+        }
+    }
+}
+
+/// Synthetic clean readings: a slow circle of radius 300 around (100, -50,
+/// 200), distinct every time.
+fn synthetic(k: u32) -> [i16; 3] {
+    let a = k as f32 * 0.05;
+    [
+        (100.0 + 300.0 * libm::cosf(a)) as i16,
+        (-50.0 + 300.0 * libm::sinf(a)) as i16,
+        200 + (k % 7) as i16,
+    ]
+}
+
+/// A clean reading comes out GUARD readings later; exact repeats are
+/// excluded, and declared stuck (once) at STUCK_REPEATS.
+fn monitor_repeats() -> bool {
+    let mut m: Monitor<u32> = Monitor::new();
+    let mut log = FaultLog::default();
+    let r = Reference::Unarmed;
+    let mut ok = true;
+    for k in 0..=GUARD {
+        let (v, out) = m.push(synthetic(k), k, &r, &mut log);
+        let want = (k == GUARD).then_some((synthetic(0), 0));
+        ok &= v == Verdict::Clean && out == want;
+    }
+    // Ten repeats of the last reading: all excluded, one stuck episode.
+    let last = synthetic(GUARD);
+    for _ in 0..10 {
+        ok &= m.push(last, 99, &r, &mut log).0 == Verdict::Repeat;
+    }
+    ok &= log.stuck.seen == 1 && log.stuck.handled == 0 && log.excluded.repeats == 10;
+    // Fresh data ends the episode.
+    ok &= m.push(synthetic(100), 100, &r, &mut log).0 == Verdict::Clean;
+    ok &= log.stuck
+        == faults::Count {
+            seen: 1,
+            handled: 1,
+        };
+    // Fewer repeats than the threshold: excluded, but no stuck episode.
+    for _ in 0..STUCK_REPEATS - 1 {
+        ok &= m.push(synthetic(100), 0, &r, &mut log).0 == Verdict::Repeat;
+    }
+    ok &= m.push(synthetic(101), 101, &r, &mut log).0 == Verdict::Clean;
+    ok &= log.stuck.seen == 1;
+    if !ok {
+        error!("monitor: {}", defmt::Debug2Format(&log));
+    }
+    ok
+}
+
+/// A saturated reading and a disturbed one each drop the held readings and
+/// the GUARD readings after them; nothing flagged or guarded is released.
+/// The meta of each reading says whether it lies within GUARD readings of a
+/// fault (and must not come out).
+fn monitor_guards() -> bool {
+    // A reference that the synthetic circle fits: centre and radius 300.
+    let centre = [100.0f32, -50.0, 203.0];
+    let r = Reference::Raw {
+        centre,
+        radius: 300.0,
+    };
+    let mut m: Monitor<bool> = Monitor::new();
+    let mut log = FaultLog::default();
+    let mut ok = true;
+    let mut released = 0u32;
+    let mut released_bad = 0u32;
+    let mut k = 0u32;
+    let mut step = |m: &mut Monitor<bool>, raw: [i16; 3], near: bool, log: &mut FaultLog| {
+        let (v, out) = m.push(raw, near, &r, log);
+        if let Some((_, bad)) = out {
+            released += 1;
+            released_bad += u32::from(bad);
+        }
+        v
+    };
+    // 20 clean readings, the last 5 within GUARD of the saturation.
+    for _ in 0..20 {
+        ok &= step(&mut m, synthetic(k), k >= 15, &mut log) == Verdict::Clean;
+        k += 1;
+    }
+    // Saturation for 3 readings.
+    for _ in 0..3 {
+        let mut s = synthetic(k);
+        s[0] = i16::MAX;
+        ok &= step(&mut m, s, true, &mut log) == Verdict::Saturated;
+        k += 1;
+    }
+    // GUARD + 5 clean readings (guard, then near the disturbance).
+    for _ in 0..GUARD + 5 {
+        ok &= step(&mut m, synthetic(k), true, &mut log) == Verdict::Clean;
+        k += 1;
+    }
+    // A disturbance of 5 readings: twice the distance from the centre.
+    for _ in 0..5 {
+        let s = synthetic(k).map(f32::from);
+        let d = [0, 1, 2].map(|i| (centre[i] + 2.0 * (s[i] - centre[i])) as i16);
+        ok &= step(&mut m, d, true, &mut log) == Verdict::Disturbed;
+        k += 1;
+    }
+    // Clean for good: GUARD guard readings, then 2 GUARD usable ones.
+    for i in 0..3 * GUARD {
+        ok &= step(&mut m, synthetic(k), i < GUARD, &mut log) == Verdict::Clean;
+        k += 1;
+    }
+    // 10 of the first 20 (the first 10, released before the saturation)
+    // and 10 of the last 20.
+    ok &= released_bad == 0 && released == 2 * GUARD;
+    ok &= log.saturated
+        == faults::Count {
+            seen: 1,
+            handled: 1,
+        };
+    ok &= log.disturbance
+        == faults::Count {
+            seen: 1,
+            handled: 1,
+        };
+    ok &= log.excluded.saturated == 3 && log.excluded.disturbed == 5;
+    ok &= log.excluded.guard == 10 + GUARD + 5 + GUARD;
+    if !ok {
+        error!(
+            "monitor: released {=u32}, of them near a fault {=u32}, {}",
+            released,
+            released_bad,
+            defmt::Debug2Format(&log)
+        );
+    }
+    ok
 }

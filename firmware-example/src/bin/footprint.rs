@@ -1,0 +1,224 @@
+//! Memory footprint of the calibration on the Cortex-M4F: flash of the
+//! code path, stack high-water mark, RAM per stored sample.
+//!
+//! One source, several builds, chosen at compile time by the environment
+//! variable `MAG_CAL_FOOTPRINT` (cargo rebuilds when it changes):
+//!
+//! - unset or `stack`: the measurement run (on QEMU). Prints
+//!   `STACK <method> n=1000 bytes=<b>` for each method and
+//!   `RAM sample_bytes=<b> store_bytes=<b> store_capacity=<n>`.
+//! - `baseline`, `ls`, `ls9+adc2`, `all`: minimal programs for the flash
+//!   figure. Each reads the same 342 static samples and prints one line;
+//!   `baseline` calls nothing, `ls` and `ls9+adc2` call
+//!   `calibrate::<f32, [i16; 3]>` with a constant `Config` (so the other
+//!   methods are dead code and the linker drops them), `all` with a method
+//!   chosen at run time (every method linked). `bench.sh footprint` builds
+//!   each (release profile: opt-level "s", fat LTO) and reports the
+//!   difference of `.text + .rodata` against `baseline`: the calibration
+//!   code path, including what it pulls in from nalgebra, libm and
+//!   compiler-builtins (soft-float `f64` helpers, if any), and excluding
+//!   the samples.
+//!
+//! # Stack high-water mark
+//!
+//! Painting: all RAM between the end of `.bss`/`.uninit` (`_stack_end`) and
+//! the current stack pointer (less 16 bytes) is filled with a pattern, the
+//! calibration runs, and the lowest word that no longer holds the pattern
+//! marks the deepest stack write; the figure is the main function's stack
+//! pointer just before the call minus that address. Limits: a frame that
+//! reserves stack it never writes is not seen (an underestimate by at most
+//! that unwritten part); a write of the pattern value itself would be missed
+//! (the pattern is not a plausible float, pointer or count); interrupt
+//! handlers are not included (none runs during the call here); and the
+//! figure holds for this build's inlining (release, opt-level "s", fat LTO;
+//! a debug build uses far more). QEMU executes the same instructions as the
+//! chip, so the stack use is the chip's.
+//!
+//! Run: `./bench.sh footprint` in `firmware-example/`.
+
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use defmt::println;
+use firmware_example::platform;
+use mag_cal_core::{calibrate, Config, LsVariant, Method, SampleStore};
+
+/// The generated parity vectors: static samples for the flash builds.
+#[allow(dead_code)]
+mod vectors {
+    include!("../../testdata/vectors.rs");
+}
+
+/// Which build this is.
+const VARIANT: &str = match option_env!("MAG_CAL_FOOTPRINT") {
+    Some(v) => v,
+    None => "stack",
+};
+
+const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+const IS_STACK: bool = str_eq(VARIANT, "stack");
+const IS_BASELINE: bool = str_eq(VARIANT, "baseline");
+const IS_LS: bool = str_eq(VARIANT, "ls");
+const IS_ADC2: bool = str_eq(VARIANT, "ls9+adc2");
+const IS_ALL: bool = str_eq(VARIANT, "all");
+const _: () = assert!(
+    IS_STACK || IS_BASELINE || IS_LS || IS_ADC2 || IS_ALL,
+    "MAG_CAL_FOOTPRINT must be unset or one of stack, baseline, ls, ls9+adc2, all"
+);
+
+/// Samples of the stack measurement (as in the bench).
+const N: usize = 1000;
+/// Fill pattern of the painted stack.
+const PATTERN: u32 = 0xA5C3_5A3C;
+
+#[entry]
+fn main() -> ! {
+    if IS_STACK {
+        stack_run()
+    } else {
+        flash_build()
+    }
+}
+
+/// The flash builds: the same input and output, with or without the call.
+fn flash_build() -> ! {
+    let samples: &[[i16; 3]] = black_box(vectors::CASES[0].samples);
+    let ok = if IS_BASELINE {
+        !black_box(samples).is_empty()
+    } else {
+        let method = if IS_LS {
+            Method::Ls
+        } else if IS_ADC2 {
+            Method::Adc2
+        } else {
+            // Every method reachable: chosen at run time.
+            black_box(Method::Adc2)
+        };
+        let config = Config {
+            method,
+            ls: LsVariant::Ls9,
+            ..Config::default()
+        };
+        let result = calibrate::<f32, [i16; 3]>(samples, &config);
+        black_box(&result).is_ok()
+    };
+    println!("flash build {=str}: {=bool}", VARIANT, ok);
+    platform::exit(ok)
+}
+
+extern "C" {
+    /// Lowest address of the stack region (cortex-m-rt's `link.x`): the end
+    /// of `.bss` and `.uninit`.
+    static _stack_end: u32;
+}
+
+/// Fills the free stack below the caller's frame with [`PATTERN`].
+#[inline(never)]
+fn paint() {
+    let sp = cortex_m::register::msp::read() as usize;
+    let bottom = core::ptr::addr_of!(_stack_end) as usize;
+    let mut a = bottom;
+    while a + 4 <= sp - 16 {
+        // SAFETY: word-aligned RAM between the end of the statics and this
+        // function's own frame: free stack that nothing references.
+        unsafe { core::ptr::write_volatile(a as *mut u32, PATTERN) };
+        a += 4;
+    }
+}
+
+/// The lowest address whose word no longer holds [`PATTERN`].
+#[inline(never)]
+fn lowest_written() -> usize {
+    let sp = cortex_m::register::msp::read() as usize;
+    let mut a = core::ptr::addr_of!(_stack_end) as usize;
+    while a + 4 <= sp {
+        // SAFETY: word-aligned RAM between the end of the statics and this
+        // function's frame.
+        if unsafe { core::ptr::read_volatile(a as *const u32) } != PATTERN {
+            return a;
+        }
+        a += 4;
+    }
+    sp
+}
+
+/// Stack bytes of one calibration with `method` (f32, LS9 start).
+fn stack_of(samples: &[[i16; 3]], method: Method) -> Option<usize> {
+    let config = Config {
+        method,
+        ls: LsVariant::Ls9,
+        ..Config::default()
+    };
+    let sp0 = cortex_m::register::msp::read() as usize;
+    paint();
+    let result = calibrate::<f32, [i16; 3]>(black_box(samples), black_box(&config));
+    let low = lowest_written();
+    black_box(&result);
+    match result {
+        Ok(_) => Some(sp0 - low),
+        Err(e) => {
+            defmt::error!("{=str}: calibration failed: {}", method.name(), e);
+            None
+        }
+    }
+}
+
+fn stack_run() -> ! {
+    use firmware_example::sim::{Scenario, Simulator};
+
+    let store =
+        cortex_m::singleton!(: SampleStore<[i16; 3], N> = SampleStore::new()).expect("taken once");
+    let mut sim = Simulator::new(Scenario {
+        sweep_samples: N as u32,
+        ..Scenario::DEFAULT
+    });
+    while !store.is_full() {
+        if store.push(sim.next_reading().counts).is_err() {
+            break;
+        }
+    }
+    let samples = store.as_slice();
+
+    let mut ok = true;
+    for method in [
+        Method::Ls,
+        Method::Adc2,
+        Method::Adc2Iterated,
+        Method::SubMle,
+        Method::Adc1,
+    ] {
+        match stack_of(samples, method) {
+            Some(bytes) => println!(
+                "STACK {=str} n={=usize} bytes={=usize}",
+                method.name(),
+                samples.len(),
+                bytes
+            ),
+            None => ok = false,
+        }
+    }
+    println!(
+        "RAM sample_bytes={=usize} store_bytes={=usize} store_capacity={=usize}",
+        core::mem::size_of::<[i16; 3]>(),
+        core::mem::size_of::<SampleStore<[i16; 3], N>>(),
+        N
+    );
+    platform::exit(ok)
+}
