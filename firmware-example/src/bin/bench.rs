@@ -51,15 +51,15 @@
 //!   which includes a 3x3 symmetric eigen decomposition), `adc2-stats` (the
 //!   artificial-data pass), `adc2-solve` (BFGS on the statistics),
 //!   `adc2-run` (`adc2-stats` + `adc2-solve` + the canonical square root),
-//!   and three proxies for private pieces: `eigen10` (nalgebra's symmetric
-//!   eigen decomposition of the 10x10 scatter, as the quadric-gap check
-//!   does), `eigen3` (one 3x3 symmetric eigen decomposition; the checks and
-//!   the canonical forms do several) and `sqrtf` (1000 calls of
-//!   `libm::sqrtf`, the software square root that nalgebra's `f32` `sqrt`
-//!   uses in `no_std`: one per sample in the ADC2 pass and in the final
-//!   pass). `adc2-other` is `adc2` minus `moments`, `scatter`, `ls9-solve`
-//!   and `adc2-run`: the normalisation pass, the final quality pass and the
-//!   checks.
+//!   and proxies for private pieces: `eigen10` (nalgebra's symmetric eigen
+//!   decomposition of the 10x10 scatter, as the quadric-gap check does),
+//!   `eigen3` (one 3x3 symmetric eigen decomposition; the checks and the
+//!   canonical forms do several), `rsqrt` (1000 calls of the core's
+//!   `Real::rsqrt` for `f32`, the inverse square root of the per-sample
+//!   passes) and `sqrtf` (1000 calls of `libm::sqrtf`, the software square
+//!   root behind `f32` `sqrt` in `no_std`). `adc2-other` is `adc2` minus
+//!   `moments`, `scatter`, `ls9-solve` and `adc2-run`: the normalisation
+//!   pass, the final quality pass and the checks.
 //! - Linearity: `adc2` and `ls` at other `n`.
 //!
 //! Run: `./bench.sh bench` in `firmware-example/`.
@@ -82,7 +82,7 @@ use mag_cal_core::methods::adc2;
 use mag_cal_core::moments::Moments;
 use mag_cal_core::nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use mag_cal_core::normalize::Normalization;
-use mag_cal_core::{calibrate, Config, LsVariant, Method};
+use mag_cal_core::{calibrate, Config, LsVariant, Method, Real};
 
 /// The sample count of the headline figures.
 const N: usize = 1000;
@@ -357,14 +357,21 @@ fn main() -> ! {
     }
 
     // Proxies for private pieces: the symmetric eigen decompositions of the
-    // checks, and the software square root (one per sample in the ADC2 and
-    // final passes).
+    // checks, and the inverse square root of the per-sample passes (and
+    // libm's software square root, for comparison).
     stage(&timer, "eigen10", SMALL_REPEATS, || {
         SymmetricEigen::try_new(black_box(scatter), f32::EPSILON, 500)
     });
     let cov = Matrix3::from_fn(|i, j| scatter[(i, j)] + if i == j { 1.0 } else { 0.0 });
     stage(&timer, "eigen3", SMALL_REPEATS, || {
         SymmetricEigen::try_new(black_box(cov), f32::EPSILON, 500)
+    });
+    stage(&timer, "rsqrt", 1, || {
+        let mut acc = 0.0f32;
+        for k in 0..N {
+            acc += Real::rsqrt(black_box(0.5 + k as f32 * 1e-3));
+        }
+        acc
     });
     stage(&timer, "sqrtf", 1, || {
         let mut acc = 0.0f32;
