@@ -237,7 +237,7 @@ fn a_narrow_band_and_a_cap_are_refused_for_coverage() {
     assert_eq!(fit(&band).unwrap_err(), Error::PoorCoverage);
     // A 45 deg cap with little noise.
     let cap = samples(
-        &directions(1000, &mut rng, |d| d.z > 0.7071),
+        &directions(1000, &mut rng, |d| d.z > std::f64::consts::FRAC_1_SQRT_2),
         [0.003; 3],
         &mut rng,
     );
@@ -266,7 +266,11 @@ fn an_expected_field_strength_catches_a_cap_fitted_too_small() {
     // sphere about 0.55x too small; only the expected field strength
     // catches it.
     let mut rng = Rng(12);
-    let cap = samples(&directions(1000, &mut rng, |d| d.z > 0.7071), B, &mut rng);
+    let cap = samples(
+        &directions(1000, &mut rng, |d| d.z > std::f64::consts::FRAC_1_SQRT_2),
+        B,
+        &mut rng,
+    );
     let f = fit(&cap).unwrap();
     let rho_true = scenario_t().determinant().abs().cbrt();
     assert!(
