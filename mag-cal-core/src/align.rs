@@ -180,15 +180,19 @@ fn norm_at<T: Real>(norms: &[T; 3], i: usize) -> T {
 
 /// Indices of three values by decreasing value.
 fn descending<T: Real>(x: [T; 3]) -> [usize; 3] {
-    let mut order = [0, 1, 2];
-    // Three compare-and-swap steps sort three elements.
-    for (i, j) in [(0, 1), (1, 2), (0, 1)] {
-        let (oi, oj) = (order[i], order[j]);
-        if norm_at(&x, oi) < norm_at(&x, oj) {
-            order.swap(i, j);
-        }
+    // Three compare-and-swap steps sort three elements (constant indices:
+    // no bounds-check path).
+    let [mut a, mut b, mut c] = [0, 1, 2];
+    if norm_at(&x, a) < norm_at(&x, b) {
+        core::mem::swap(&mut a, &mut b);
     }
-    order
+    if norm_at(&x, b) < norm_at(&x, c) {
+        core::mem::swap(&mut b, &mut c);
+    }
+    if norm_at(&x, a) < norm_at(&x, b) {
+        core::mem::swap(&mut a, &mut b);
+    }
+    [a, b, c]
 }
 
 /// One-sided Jacobi SVD of a finite 3x3 matrix with entries of at most 1 in

@@ -269,7 +269,11 @@ impl<T: Real, const N: usize> HeadingSmoother<T, N> {
             if let Some(slot) = self.ring.get_mut(self.next) {
                 *slot = (cos, sin);
             }
-            self.next = (self.next + 1) % self.window;
+            // Wrap by comparison, not `%`: no division-by-zero path.
+            self.next += 1;
+            if self.next >= self.window {
+                self.next = 0;
+            }
             self.len = (self.len + 1).min(self.window);
         }
         self.mean()

@@ -119,8 +119,8 @@ pub struct Config {
     /// [`Warning::PassCap`].
     pub max_passes: u32,
     /// Stop tolerance of [`Method::Adc2Iterated`] on the gauge-free change
-    /// of a pass, `max|dM| rho^2 + max|db| / rho`; `None` is `1e-6` in
-    /// `f64` and `1e-5` in `f32`.
+    /// of a pass, `max|dM| rho^2 + max|db| / rho`; `None` (or a value that
+    /// is not positive and finite) is `1e-6` in `f64` and `1e-5` in `f32`.
     pub pass_tolerance: Option<f64>,
     /// Per-sample noise covariance `Sigma`, sensor units squared, for
     /// [`Method::Adc1`] (when `None`, it is estimated from the LS residuals,

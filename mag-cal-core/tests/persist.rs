@@ -359,3 +359,18 @@ fn fuzz_never_panics() {
     // Random W and rho are consistent with probability ~0.
     assert_eq!(accepted, 0);
 }
+
+/// Found by fuzzing: a field strength beyond about 4e12 units made det(W)
+/// subnormal in f32 and the field strength wrong by up to 20 %, and the
+/// record then failed its own consistency check on reading.
+#[test]
+fn huge_field_strength_in_f32_is_exact_and_round_trips() {
+    use mag_cal_core::nalgebra::{Matrix3, Vector3};
+    use mag_cal_core::Calibration;
+    let w = Matrix3::from_diagonal(&Vector3::new(7.349879e-15f32, 3.8492129e-16, 2.1973967e-13));
+    let cal = Calibration::<f32>::new(Vector3::new(75.27761, 522.31775, -862.0255), w).unwrap();
+    let want = 1.0 / (7.349879e-15f64 * 3.8492129e-16 * 2.1973967e-13).cbrt();
+    let rho = f64::from(cal.field_strength());
+    assert!((rho / want - 1.0).abs() < 1e-6, "{rho} vs {want}");
+    assert!(from_bytes::<f32>(&to_bytes(&cal)).is_ok());
+}

@@ -105,9 +105,11 @@ pub fn run<T: Real, S: Sample>(
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
     let tol = match config.pass_tolerance {
-        Some(t) => T::lit(t),
-        None if T::EPSILON > T::lit(1e-10) => T::lit(1e-5),
-        None => T::lit(1e-6),
+        // A tolerance that can never be met (negative, zero, NaN) would only
+        // run to the pass cap: it means the default.
+        Some(t) if t > 0.0 && t.is_finite() => T::lit(t),
+        _ if T::EPSILON > T::lit(1e-10) => T::lit(1e-5),
+        _ => T::lit(1e-6),
     };
     let mut accel = Anderson::<T, DIM, MEMORY>::with_mixing(T::lit(MIXING));
     let mut x = pack(&ls.w, &ls.centre);
