@@ -125,3 +125,22 @@ pub fn make_samples_axes(
 pub fn sphere(n: usize, rng: &mut Rng) -> Vec<Vector3<f64>> {
     (0..n).map(|_| rng.unit_vector()).collect()
 }
+
+/// The design document's truth (`T`, `b = (0.3, -0.2, 0.1)`) seen from
+/// 1000 random directions on the sphere or on a +-30 deg band, with
+/// per-axis noise: the parity tests' standard data.
+pub fn scenario_samples(noise: [f64; 3], banded: bool, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = Rng(seed);
+    let dirs = if banded {
+        band(1000, 30.0, &mut rng)
+    } else {
+        sphere(1000, &mut rng)
+    };
+    make_samples_axes(
+        &scenario_t(),
+        &Vector3::new(0.3, -0.2, 0.1),
+        &dirs,
+        noise,
+        &mut rng,
+    )
+}

@@ -564,9 +564,12 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
             if !(rho > T::zero() && rho.is_finite()) {
                 return Err(format!("bad field strength: {}", what()));
             }
-            // rho = det(W)^(-1/3), recomputed in f64 from the W returned.
-            let det64 = c.soft_iron().map(Real::to_f64).determinant();
-            let rho64 = 1.0 / det64.cbrt();
+            // rho = det(W)^(-1/3), recomputed in f64 from the W returned,
+            // on W scaled to a largest entry of 1 (det(W) itself can
+            // underflow even in f64, e.g. W ~ 1e-131).
+            let w64 = c.soft_iron().map(Real::to_f64);
+            let s64 = w64.amax();
+            let rho64 = 1.0 / (s64 * (w64 / s64).determinant().cbrt());
             let rel = (rho.to_f64() - rho64).abs() / rho64;
             if rel.is_nan() || rel > T::EPSILON.to_f64() * 64.0 {
                 return Err(format!(

@@ -2,7 +2,7 @@
 //! float64 reference (explicit design matrix, SVD/QR, closed-form ADC2).
 
 use host_tests::reference::{self, RefFit, RefLs};
-use host_tests::sim::{band, make_samples_axes, scenario_t, sphere, Rng};
+use host_tests::sim::{make_samples_axes, scenario_t, sphere, Rng};
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, Config, LsVariant, Method, Real, Sample};
 
@@ -46,21 +46,7 @@ fn check<T: Real, S: Sample>(label: &str, samples: &[S], reference_input: &[[f64
     }
 }
 
-fn scenario(noise: [f64; 3], banded: bool, seed: u64) -> Vec<[f64; 3]> {
-    let mut rng = Rng(seed);
-    let dirs = if banded {
-        band(1000, 30.0, &mut rng)
-    } else {
-        sphere(1000, &mut rng)
-    };
-    make_samples_axes(
-        &scenario_t(),
-        &Vector3::new(0.3, -0.2, 0.1),
-        &dirs,
-        noise,
-        &mut rng,
-    )
-}
+use host_tests::sim::scenario_samples as scenario;
 
 #[test]
 fn f64_matches_reference_to_1e_9() {

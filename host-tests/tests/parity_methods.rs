@@ -7,25 +7,9 @@
 //!   numeric Jacobian on the same cost.
 
 use host_tests::reference::{self, RefFit, RefLs};
-use host_tests::sim::{band, make_samples_axes, scenario_t, sphere, Rng};
-use mag_cal_core::nalgebra::Vector3;
 use mag_cal_core::{calibrate, Config, Fit, Method};
 
-fn scenario(noise: [f64; 3], banded: bool, seed: u64) -> Vec<[f64; 3]> {
-    let mut rng = Rng(seed);
-    let dirs = if banded {
-        band(1000, 30.0, &mut rng)
-    } else {
-        sphere(1000, &mut rng)
-    };
-    make_samples_axes(
-        &scenario_t(),
-        &Vector3::new(0.3, -0.2, 0.1),
-        &dirs,
-        noise,
-        &mut rng,
-    )
-}
+use host_tests::sim::scenario_samples as scenario;
 
 /// max|dM| / max|M| and |db| / rho.
 fn deviation(core: &Fit<f64>, want: &RefFit) -> (f64, f64) {

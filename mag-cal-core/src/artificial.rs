@@ -24,7 +24,7 @@
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
 use crate::moments::BLOCK;
-use crate::normalize::Normalization;
+use crate::normalize::{Normalization, Projector};
 use crate::sample::{finite, Sample};
 use crate::{Error, Real};
 
@@ -86,19 +86,7 @@ impl<T: Real> Stats<T> {
         w: &Matrix3<T>,
     ) -> Result<Self, Error> {
         let one = T::one();
-        let (cx, cy, cz, is) = (norm.centre.x, norm.centre.y, norm.centre.z, norm.inv_scale);
-        let (bx, by, bz) = (centre.x, centre.y, centre.z);
-        let [w00, w10, w20, w01, w11, w21, w02, w12, w22] = [
-            w[(0, 0)],
-            w[(1, 0)],
-            w[(2, 0)],
-            w[(0, 1)],
-            w[(1, 1)],
-            w[(2, 1)],
-            w[(0, 2)],
-            w[(1, 2)],
-            w[(2, 2)],
-        ];
+        let map = Projector::new(norm, centre, w);
         let mut total = [T::zero(); 27];
         let mut count = 0usize;
         for block in samples.chunks(BLOCK) {
@@ -107,12 +95,7 @@ impl<T: Real> Stats<T> {
                 let Some([y0, y1, y2]) = finite::<T, S>(sample) else {
                     continue;
                 };
-                let dx = (y0 - cx) * is - bx;
-                let dy = (y1 - cy) * is - by;
-                let dz = (y2 - cz) * is - bz;
-                let ux = w00 * dx + w01 * dy + w02 * dz;
-                let uy = w10 * dx + w11 * dy + w12 * dz;
-                let uz = w20 * dx + w21 * dy + w22 * dz;
+                let ([dx, dy, dz], [ux, uy, uz]) = map.project([y0, y1, y2]);
                 let q = ux * ux + uy * uy + uz * uz;
                 if !(q >= T::MIN_POSITIVE) {
                     // At the fitted centre the direction is undefined.

@@ -130,3 +130,62 @@ fn spread_about<T: Real, S: Sample>(samples: &[S], c: &Vector3<T>) -> T {
         })
         .fold(T::zero(), |a, b| a + b)
 }
+
+/// The per-sample map of the passes that follow a fit: a raw sample to its
+/// centred vector `d = (y - c)/s - b'` and calibrated vector `u = W' d`, on
+/// scalars (generic small-matrix operations in a per-sample loop cost about
+/// ten times as much on a Cortex-M4F).
+#[derive(Clone, Copy)]
+pub(crate) struct Projector<T: Real> {
+    c: [T; 3],
+    inv_scale: T,
+    b: [T; 3],
+    /// `W'` row-major.
+    w: [T; 9],
+}
+
+impl<T: Real> Projector<T> {
+    /// For the fit `(b', W')` in the coordinates of `norm`.
+    pub(crate) fn new(
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &nalgebra::Matrix3<T>,
+    ) -> Self {
+        Self {
+            c: [norm.centre.x, norm.centre.y, norm.centre.z],
+            inv_scale: norm.inv_scale,
+            b: [centre.x, centre.y, centre.z],
+            w: [
+                w[(0, 0)],
+                w[(0, 1)],
+                w[(0, 2)],
+                w[(1, 0)],
+                w[(1, 1)],
+                w[(1, 2)],
+                w[(2, 0)],
+                w[(2, 1)],
+                w[(2, 2)],
+            ],
+        }
+    }
+
+    /// `(d, u)` for a finite raw sample `y`.
+    #[inline(always)]
+    pub(crate) fn project(&self, y: [T; 3]) -> ([T; 3], [T; 3]) {
+        let [c0, c1, c2] = self.c;
+        let [b0, b1, b2] = self.b;
+        let [w00, w01, w02, w10, w11, w12, w20, w21, w22] = self.w;
+        let is = self.inv_scale;
+        let d = [
+            (y[0] - c0) * is - b0,
+            (y[1] - c1) * is - b1,
+            (y[2] - c2) * is - b2,
+        ];
+        let u = [
+            w00 * d[0] + w01 * d[1] + w02 * d[2],
+            w10 * d[0] + w11 * d[1] + w12 * d[2],
+            w20 * d[0] + w21 * d[1] + w22 * d[2],
+        ];
+        (d, u)
+    }
+}

@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, Matrix4, SMatrix, SVector, Vector3};
 
 use crate::linalg::sym_eigen;
 use crate::moments::{Moments, BLOCK};
-use crate::normalize::Normalization;
+use crate::normalize::{Normalization, Projector};
 use crate::sample::{finite, Sample};
 use crate::{Error, Real};
 
@@ -209,19 +209,7 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     w: &Matrix3<T>,
 ) -> Result<FinalPass<T>, Error> {
     let one = T::one();
-    let (cx, cy, cz, is) = (norm.centre.x, norm.centre.y, norm.centre.z, norm.inv_scale);
-    let (bx, by, bz) = (centre.x, centre.y, centre.z);
-    let [w00, w10, w20, w01, w11, w21, w02, w12, w22] = [
-        w[(0, 0)],
-        w[(1, 0)],
-        w[(2, 0)],
-        w[(0, 1)],
-        w[(1, 1)],
-        w[(2, 1)],
-        w[(0, 2)],
-        w[(1, 2)],
-        w[(2, 2)],
-    ];
+    let map = Projector::new(norm, centre, w);
     // Scalar accumulators: squared radial error, sum h, sum h h^T (upper).
     let mut total = [T::zero(); 10];
     let mut count = 0usize;
@@ -231,12 +219,7 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
             let Some([y0, y1, y2]) = finite::<T, S>(sample) else {
                 continue;
             };
-            let dx = (y0 - cx) * is - bx;
-            let dy = (y1 - cy) * is - by;
-            let dz = (y2 - cz) * is - bz;
-            let ux = w00 * dx + w01 * dy + w02 * dz;
-            let uy = w10 * dx + w11 * dy + w12 * dz;
-            let uz = w20 * dx + w21 * dy + w22 * dz;
+            let (_, [ux, uy, uz]) = map.project([y0, y1, y2]);
             let q = ux * ux + uy * uy + uz * uz;
             count += 1;
             if !(q >= T::MIN_POSITIVE) {
