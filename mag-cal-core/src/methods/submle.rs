@@ -39,15 +39,18 @@ use crate::{Config, Error, Real, Warnings};
 /// Number of parameters: the upper triangle of `A` (6) and `b'` (3).
 pub const PARAMS: usize = 9;
 
-/// Positions of `A`'s upper-triangular entries in the parameter vector.
-const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-
+/// The parameters: `A`'s upper triangle, row by row, then `b'`. Written
+/// out rather than looped over an index table, which left bounds-check
+/// paths the optimiser could not remove at opt-level "s".
 fn unpack<T: Real>(x: &SVector<T, PARAMS>) -> (Matrix3<T>, Vector3<T>) {
-    let mut a = Matrix3::zeros();
-    for (k, &(i, j)) in UPPER.iter().enumerate() {
-        a[(i, j)] = x[k];
-    }
+    let z = T::zero();
+    let a = Matrix3::new(x[0], x[1], x[2], z, x[3], x[4], z, z, x[5]);
     (a, Vector3::new(x[6], x[7], x[8]))
+}
+
+/// `A`'s upper triangle and `b'` as a parameter vector (see [`unpack`]).
+fn pack<T: Real>(a: &Matrix3<T>, b: &Vector3<T>) -> SVector<T, PARAMS> {
+    SVector::<T, PARAMS>::from([a.m11, a.m12, a.m13, a.m22, a.m23, a.m33, b.x, b.y, b.z])
 }
 
 /// The subMLE cost over the samples, normalised by `norm`.
@@ -95,14 +98,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
             db += db_blk;
         }
         let da = a * dm * two;
-        let mut g = SVector::<T, PARAMS>::zeros();
-        for (k, &(i, j)) in UPPER.iter().enumerate() {
-            g[k] = da[(i, j)];
-        }
-        g[6] = db.x;
-        g[7] = db.y;
-        g[8] = db.z;
-        (cost, g)
+        (cost, pack(&da, &db))
     }
 }
 
@@ -118,13 +114,7 @@ pub fn run<T: Real, S: Sample>(
         .ok_or(Error::NotAnEllipsoid)?
         .unpack()
         .transpose();
-    let mut x0 = SVector::<T, PARAMS>::zeros();
-    for (k, &(i, j)) in UPPER.iter().enumerate() {
-        x0[k] = a0[(i, j)];
-    }
-    x0[6] = ls.centre.x;
-    x0[7] = ls.centre.y;
-    x0[8] = ls.centre.z;
+    let x0 = pack(&a0, &ls.centre);
     let objective = SubMleObjective::new(samples, norm);
     // The paper's stop: a step below 1e-6 of the parameter scale. The
     // gradient test only ends exact fits (noise-free data: J = 0 at the
