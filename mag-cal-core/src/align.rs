@@ -337,41 +337,9 @@ impl<T: Real> AlignedCalibration<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Rotation3, Unit};
+    use nalgebra::Rotation3;
 
-    /// xorshift64*: a small deterministic generator for test data.
-    struct Rng(u64);
-
-    impl Rng {
-        fn uniform(&mut self) -> f64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        /// Uniform in [-1, 1).
-        fn symmetric(&mut self) -> f64 {
-            2.0 * self.uniform() - 1.0
-        }
-
-        /// A unit vector, uniform on the sphere (rejection from the cube).
-        fn direction(&mut self) -> Vector3<f64> {
-            loop {
-                let v = Vector3::new(self.symmetric(), self.symmetric(), self.symmetric());
-                let n = v.norm();
-                if n > 0.1 && n <= 1.0 {
-                    return v / n;
-                }
-            }
-        }
-
-        /// A rotation about a random axis by a random angle in [0, pi).
-        fn rotation(&mut self) -> Matrix3<f64> {
-            let axis = Unit::new_normalize(self.direction());
-            *Rotation3::from_axis_angle(&axis, core::f64::consts::PI * self.uniform()).matrix()
-        }
-    }
+    use crate::test_rng::Rng;
 
     fn arr(v: Vector3<f64>) -> [f64; 3] {
         [v.x, v.y, v.z]

@@ -314,22 +314,7 @@ mod tests {
     use super::*;
     use nalgebra::{Matrix3, Rotation3};
 
-    /// xorshift64*: a small deterministic generator for test data.
-    struct Rng(u64);
-
-    impl Rng {
-        fn uniform(&mut self) -> f64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        /// Uniform in [lo, hi).
-        fn range(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * self.uniform()
-        }
-    }
+    use crate::test_rng::Rng;
 
     const RAD: f64 = core::f64::consts::PI / 180.0;
 

@@ -86,6 +86,8 @@ pub mod quality;
 pub mod quasi_newton;
 mod real;
 mod sample;
+#[cfg(test)]
+mod test_rng;
 
 /// The README's example runs as a doctest.
 #[cfg(doctest)]
