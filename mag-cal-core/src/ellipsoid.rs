@@ -1,9 +1,12 @@
 //! Step 1 of Algorithm 1: the algebraic least-squares ellipsoid fit
 //! (design document, section 3), in three variants sharing the moments.
 
-use nalgebra::{Cholesky, Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-use crate::linalg::{sym_eigen, sym_sqrt_and_inv_sqrt};
+use crate::linalg::{
+    cholesky, cholesky_solve, from_array, solve3, solve_lower, solve_lower_transposed, sym_eigen,
+    sym_sqrt_and_inv_sqrt, to_array,
+};
 use crate::moments::Moments;
 use crate::{Error, Real};
 
@@ -78,20 +81,29 @@ pub fn fit_scatter<T: Real>(
 
 /// `v = [v9, -1]` with `S9 v9 = sum phi9` (Cholesky).
 fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let s9: SMatrix<T, 9, 9> = s.fixed_view::<9, 9>(0, 0).into_owned();
-    let rhs: SVector<T, 9> = s.fixed_view::<9, 1>(0, 9).into_owned();
-    let v9 = Cholesky::new(s9).ok_or(Error::SingularSystem)?.solve(&rhs);
+    let s = to_array(s);
+    let mut s9 = [[T::zero(); 9]; 9];
+    let mut rhs = [T::zero(); 9];
+    for i in 0..9 {
+        for j in 0..9 {
+            s9[i][j] = s[i][j];
+        }
+        rhs[i] = s[i][9];
+    }
+    let l = cholesky(&s9).ok_or(Error::SingularSystem)?;
+    let v9 = cholesky_solve(&l, &rhs);
     let mut v = SVector::<T, 10>::zeros();
-    v.fixed_rows_mut::<9>(0).copy_from(&v9);
+    for (x, &y) in v.iter_mut().zip(&v9) {
+        *x = y;
+    }
     v[9] = -T::one();
     Ok(v)
 }
 
 /// `v` = eigenvector of the smallest eigenvalue of `S`.
 fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let eig = sym_eigen(*s)?;
-    let k = eig.eigenvalues.imin();
-    Ok(eig.eigenvectors.column(k).into_owned())
+    let eig = sym_eigen(&to_array(s))?;
+    Ok(SVector::from(eig.min_vector()))
 }
 
 /// Li and Griffiths: `(S11 - S12 S22^-1 S21) v1 = lambda C1 v1` for the one
@@ -106,50 +118,96 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// the solution by about that relative amount. (Always adding the ridge cost
 /// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let s11: SMatrix<T, 6, 6> = s.fixed_view::<6, 6>(0, 0).into_owned();
-    let s12: SMatrix<T, 6, 4> = s.fixed_view::<6, 4>(0, 6).into_owned();
-    let s22: SMatrix<T, 4, 4> = s.fixed_view::<4, 4>(6, 6).into_owned();
-    let s22 = Cholesky::new(s22).ok_or(Error::SingularSystem)?;
-    // S22^-1 S21 (4x6)
-    let k = s22.solve(&s12.transpose());
-    let red = s11 - s12 * k;
-    let red = (red + red.transpose()) * T::lit(0.5);
-    let l = match Cholesky::new(red) {
-        Some(c) => c,
-        None => {
-            let ridge = red.trace() * T::EPSILON * T::lit(16.0);
-            Cholesky::new(red + SMatrix::<T, 6, 6>::identity() * ridge)
-                .ok_or(Error::SingularSystem)?
+    let s = to_array(s);
+    let zero = T::zero();
+    // The blocks: S11 (6x6), S12 (rows 0-5, columns 6-9), S22 (4x4).
+    let mut s22 = [[zero; 4]; 4];
+    let mut s12 = [[zero; 4]; 6];
+    for i in 0..4 {
+        for j in 0..4 {
+            s22[i][j] = s[6 + i][6 + j];
         }
     }
-    .unpack();
-    let mut c1 = SMatrix::<T, 6, 6>::zeros();
+    for i in 0..6 {
+        for j in 0..4 {
+            s12[i][j] = s[i][6 + j];
+        }
+    }
+    let l22 = cholesky(&s22).ok_or(Error::SingularSystem)?;
+    // K = S22^-1 S21 (4x6), kept by columns: k[j] = S22^-1 (row j of S12).
+    let mut k = [[zero; 4]; 6];
+    for (kj, row) in k.iter_mut().zip(&s12) {
+        *kj = cholesky_solve(&l22, row);
+    }
+    // Red = S11 - S12 K, symmetrised; trace for the ridge.
+    let mut red = [[zero; 6]; 6];
+    let mut trace = zero;
+    for i in 0..6 {
+        for j in 0..6 {
+            let mut sik = zero;
+            let mut sjk = zero;
+            for m in 0..4 {
+                sik += s12[i][m] * k[j][m];
+                sjk += s12[j][m] * k[i][m];
+            }
+            red[i][j] = (s[i][j] - sik) * T::lit(0.5) + (s[j][i] - sjk) * T::lit(0.5);
+        }
+        trace += red[i][i];
+    }
+    let l = match cholesky(&red) {
+        Some(l) => l,
+        None => {
+            let ridge = trace * T::EPSILON * T::lit(16.0);
+            for (i, row) in red.iter_mut().enumerate() {
+                if let Some(d) = row.get_mut(i) {
+                    *d += ridge;
+                }
+            }
+            cholesky(&red).ok_or(Error::SingularSystem)?
+        }
+    };
+    // C1: -1 on the first diagonal block, +1 off it (the I^2 - 4J form),
+    // -4 for the cross terms' diagonal.
+    let mut c1 = [[zero; 6]; 6];
     for i in 0..3 {
         for j in 0..3 {
-            c1[(i, j)] = if i == j { -T::one() } else { T::one() };
+            c1[i][j] = if i == j { -T::one() } else { T::one() };
         }
-        c1[(i + 3, i + 3)] = T::lit(-4.0);
+        c1[i + 3][i + 3] = T::lit(-4.0);
     }
-    // L^-1 C1 L^-T by two triangular solves.
-    let a = l.solve_lower_triangular(&c1).ok_or(Error::SingularSystem)?;
-    let kmat = l
-        .solve_lower_triangular(&a.transpose())
-        .ok_or(Error::SingularSystem)?;
-    let kmat = (kmat + kmat.transpose()) * T::lit(0.5);
-    let eig = sym_eigen(kmat)?;
-    let top = eig.eigenvalues.imax();
-    if !(eig.eigenvalues[top] > T::zero()) {
+    // A = L^-1 C1 by columns (C1 is symmetric: its rows are its columns),
+    // then L^-1 A^T = L^-1 C1 L^-T by columns.
+    let mut a = [[zero; 6]; 6];
+    for (aj, cj) in a.iter_mut().zip(&c1) {
+        *aj = solve_lower(&l, cj);
+    }
+    let mut kmat = [[zero; 6]; 6];
+    for j in 0..6 {
+        let mut row = [zero; 6];
+        for (r, aj) in row.iter_mut().zip(&a) {
+            *r = aj[j];
+        }
+        kmat[j] = solve_lower(&l, &row);
+    }
+    let eig = sym_eigen(&kmat)?;
+    if !(eig.max() > zero) {
         return Err(Error::NotAnEllipsoid);
     }
-    let w = eig.eigenvectors.column(top).into_owned();
-    let v1 = l
-        .transpose()
-        .solve_upper_triangular(&w)
-        .ok_or(Error::SingularSystem)?;
-    let v2 = -(k * v1);
+    let v1 = solve_lower_transposed(&l, &eig.max_vector());
     let mut v = SVector::<T, 10>::zeros();
-    v.fixed_rows_mut::<6>(0).copy_from(&v1);
-    v.fixed_rows_mut::<4>(6).copy_from(&v2);
+    for i in 0..6 {
+        v[i] = v1[i];
+    }
+    for m in 0..4 {
+        let mut kv = zero;
+        for (kj, &x) in k.iter().zip(&v1) {
+            kv += kj[m] * x;
+        }
+        v[6 + m] = -kv;
+    }
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(Error::SingularSystem);
+    }
     Ok(v)
 }
 
@@ -160,10 +218,12 @@ pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> 
     if !v.iter().all(|x| x.is_finite()) {
         return Err(Error::SingularSystem);
     }
-    let a = Matrix3::new(v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2]);
-    let p = Vector3::new(v[6], v[7], v[8]);
-    // A is definite (of either sign) for an ellipsoid; LU handles both.
-    let centre = -a.lu().solve(&p).ok_or(Error::NotAnEllipsoid)?;
+    let a = [[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]];
+    // A is definite (of either sign) for an ellipsoid; Cramer's rule
+    // handles both.
+    let c = solve3(&a, &[v[6], v[7], v[8]]).ok_or(Error::NotAnEllipsoid)?;
+    let centre = -Vector3::new(c[0], c[1], c[2]);
+    let a = from_array(a);
     let k = centre.dot(&(a * centre)) - v[9];
     if !(k != T::zero()) || !centre.iter().all(|x| x.is_finite()) {
         return Err(Error::NotAnEllipsoid);

@@ -1,83 +1,645 @@
-//! Small dense helpers over nalgebra's fixed-size decompositions.
+//! Small dense linear algebra on fixed-size arrays: a cyclic Jacobi
+//! symmetric eigen-decomposition, Cholesky factorisation and solves, and the
+//! symmetric square roots of 3x3 matrices.
 //!
-//! Every iterative decomposition gets an explicit tolerance and iteration
-//! cap (nalgebra treats a cap of 0 as "unbounded"; we never pass 0).
+//! Why not nalgebra's decompositions: they index with run-time indices
+//! behind assertions, and those panic paths survive optimisation in the
+//! firmware build (the link proof, `no-panic-check/`, listed them); their
+//! generic code also cost flash and stack on the Cortex-M4F
+//! (`docs/benchmarks.md`). Here every index runs over `0..N` of an
+//! `[[T; N]; N]`, which the compiler checks once at compile time, and every
+//! iteration is capped. Matrices are symmetric where it matters, so the
+//! row/column order of nalgebra's column-major storage does not.
 
-use nalgebra::allocator::Allocator;
-use nalgebra::{
-    Const, DefaultAllocator, DimDiff, DimSub, Matrix3, SMatrix, SymmetricEigen, Vector3, U1,
-};
+use nalgebra::{ArrayStorage, Matrix3, SMatrix};
 
 use crate::{Error, Real};
 
-/// Iteration cap for nalgebra's symmetric QR eigen-solver. A 10x10 matrix
-/// converges in a few tens of implicit QR steps; 500 is far beyond that.
-const EIGEN_MAX_ITER: usize = 500;
+/// Cap on Jacobi sweeps. A sweep visits every pair once and convergence is
+/// quadratic: 3x3 matrices need 3-5 sweeps, 10x10 ones 6-10.
+pub(crate) const MAX_SWEEPS: u32 = 60;
 
-/// Symmetric eigen-decomposition with a bounded iteration count.
-pub(crate) fn sym_eigen<T: Real, const D: usize>(
-    m: SMatrix<T, D, D>,
-) -> Result<SymmetricEigen<T, Const<D>>, Error>
-where
-    Const<D>: DimSub<U1>,
-    DefaultAllocator: Allocator<DimDiff<Const<D>, U1>>,
-{
-    if !m.iter().all(|v| v.is_finite()) {
-        return Err(Error::SingularSystem);
-    }
-    SymmetricEigen::<T, Const<D>>::try_new(m, T::EPSILON, EIGEN_MAX_ITER).ok_or(
-        Error::NoConvergence {
-            iterations: EIGEN_MAX_ITER as u32,
-        },
-    )
+/// A square array matrix, `a[row][column]`.
+pub(crate) type Mat<T, const N: usize> = [[T; N]; N];
+
+/// The array of an nalgebra matrix (column-major: `a[column][row]`, which is
+/// the same matrix for a symmetric one).
+pub(crate) fn to_array<T: Real, const N: usize>(m: &SMatrix<T, N, N>) -> Mat<T, N> {
+    m.data.0
 }
 
-/// `V f(Lambda) V^T` for a symmetric positive definite 3x3 matrix, or
-/// `None`-like error when an eigenvalue is not strictly positive.
-fn sym_function<T: Real>(m: &Matrix3<T>, f: impl Fn(T) -> T) -> Result<Matrix3<T>, Error> {
-    let eig = sym_eigen(m.symmetric_part())?;
-    let max = eig.eigenvalues.amax();
+/// The nalgebra matrix of an array (read as `a[column][row]`).
+pub(crate) fn from_array<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N, N> {
+    SMatrix::from_data(ArrayStorage(a))
+}
+
+/// Eigenvalues and eigenvectors of a symmetric matrix, unsorted:
+/// `vectors[k]` belongs to `values[k]`, has unit length, and the vectors
+/// are orthogonal to rounding.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SymEigen<T, const N: usize> {
+    pub values: [T; N],
+    pub vectors: Mat<T, N>,
+}
+
+impl<T: Real, const N: usize> SymEigen<T, N> {
+    /// Index of the smallest eigenvalue.
+    pub fn argmin(&self) -> usize {
+        let mut k = 0;
+        for i in 1..N {
+            if self.values[i] < self.values[k] {
+                k = i;
+            }
+        }
+        k
+    }
+
+    /// Index of the largest eigenvalue.
+    pub fn argmax(&self) -> usize {
+        let mut k = 0;
+        for i in 1..N {
+            if self.values[i] > self.values[k] {
+                k = i;
+            }
+        }
+        k
+    }
+
+    /// Largest eigenvalue (zero for `N = 0`).
+    pub fn max(&self) -> T {
+        let mut v = self.values.first().copied().unwrap_or_else(T::zero);
+        for &x in &self.values {
+            v = v.max(x);
+        }
+        v
+    }
+
+    /// The eigenvector of the smallest eigenvalue.
+    pub fn min_vector(&self) -> [T; N] {
+        let k = self.argmin();
+        self.vectors.get(k).copied().unwrap_or([T::zero(); N])
+    }
+
+    /// The eigenvector of the largest eigenvalue.
+    pub fn max_vector(&self) -> [T; N] {
+        let k = self.argmax();
+        self.vectors.get(k).copied().unwrap_or([T::zero(); N])
+    }
+}
+
+/// Symmetric eigen-decomposition by the cyclic Jacobi method (only the
+/// symmetric part of `m` is used).
+///
+/// The matrix is first divided by its largest entry, so no square
+/// overflows. A rotation is skipped (and its entry zeroed) once
+/// `|a_pq| <= eps sqrt(|a_pp a_qq|)`, the criterion under which Jacobi
+/// gives every eigenvalue to high relative accuracy; the sweep in which
+/// nothing rotates ends the method. Non-finite entries give
+/// [`Error::SingularSystem`], a sweep cap hit [`Error::NoConvergence`].
+pub(crate) fn sym_eigen<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<SymEigen<T, N>, Error> {
+    let (a, vectors, scale) = jacobi::<T, N, true>(m)?;
+    let mut values = [T::zero(); N];
+    for i in 0..N {
+        values[i] = a[i][i] * scale;
+    }
+    Ok(SymEigen { values, vectors })
+}
+
+/// The eigenvalues alone (cheaper: no vectors are accumulated).
+pub(crate) fn sym_eigenvalues<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<[T; N], Error> {
+    let (a, _, scale) = jacobi::<T, N, false>(m)?;
+    let mut values = [T::zero(); N];
+    for i in 0..N {
+        values[i] = a[i][i] * scale;
+    }
+    Ok(values)
+}
+
+/// Smallest and largest of some values.
+pub(crate) fn min_max<T: Real, const N: usize>(values: &[T; N]) -> (T, T) {
+    let first = values.first().copied().unwrap_or_else(T::zero);
+    let (mut lo, mut hi) = (first, first);
+    for &x in values {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    (lo, hi)
+}
+
+/// The Jacobi iteration: the (scaled) diagonalised matrix, the eigenvectors
+/// as rows when `VECTORS`, and the scale to multiply the diagonal by.
+fn jacobi<T: Real, const N: usize, const VECTORS: bool>(
+    m: &Mat<T, N>,
+) -> Result<(Mat<T, N>, Mat<T, N>, T), Error> {
+    let zero = T::zero();
+    let one = T::one();
+    let half = T::lit(0.5);
+    let mut scale = zero;
+    for row in m {
+        for &x in row {
+            if !x.is_finite() {
+                return Err(Error::SingularSystem);
+            }
+            scale = scale.max(x.abs());
+        }
+    }
+    let mut v = [[zero; N]; N];
+    for (i, row) in v.iter_mut().enumerate() {
+        if let Some(d) = row.get_mut(i) {
+            *d = one;
+        }
+    }
+    if scale == zero {
+        return Ok(([[zero; N]; N], v, zero));
+    }
+    // Symmetrise while scaling (each half first: no overflow near max).
+    let mut a = [[zero; N]; N];
+    for i in 0..N {
+        for j in 0..N {
+            a[i][j] = m[i][j] / scale * half + m[j][i] / scale * half;
+        }
+    }
+    let eps = T::EPSILON;
+    // Beyond this |theta|, theta^2 + 1 rounds to theta^2.
+    let huge = one / eps;
+    for _ in 0..MAX_SWEEPS {
+        let mut rotated = false;
+        for p in 0..N {
+            for q in (p + 1)..N {
+                let apq = a[p][q];
+                let (app, aqq) = (a[p][p], a[q][q]);
+                if apq.abs() <= eps * (app * aqq).abs().sqrt() {
+                    a[p][q] = zero;
+                    a[q][p] = zero;
+                    continue;
+                }
+                rotated = true;
+                // The rotation that zeroes a_pq: t = tan(phi), the smaller
+                // root of t^2 + 2 theta t - 1 = 0.
+                let theta = (aqq - app) / (apq + apq);
+                let at = theta.abs();
+                let root = if at > huge {
+                    at + at
+                } else {
+                    at + (at * at + one).sqrt()
+                };
+                let t = if theta < zero {
+                    -one / root
+                } else {
+                    one / root
+                };
+                let c = one / (t * t + one).sqrt();
+                let s = t * c;
+                a[p][p] = app - t * apq;
+                a[q][q] = aqq + t * apq;
+                a[p][q] = zero;
+                a[q][p] = zero;
+                for r in 0..N {
+                    if r != p && r != q {
+                        let (arp, arq) = (a[r][p], a[r][q]);
+                        let new_p = c * arp - s * arq;
+                        let new_q = s * arp + c * arq;
+                        a[r][p] = new_p;
+                        a[p][r] = new_p;
+                        a[r][q] = new_q;
+                        a[q][r] = new_q;
+                    }
+                }
+                if VECTORS {
+                    for r in 0..N {
+                        let (vp, vq) = (v[p][r], v[q][r]);
+                        v[p][r] = c * vp - s * vq;
+                        v[q][r] = s * vp + c * vq;
+                    }
+                }
+            }
+        }
+        if !rotated {
+            return Ok((a, v, scale));
+        }
+    }
+    Err(Error::NoConvergence {
+        iterations: MAX_SWEEPS,
+    })
+}
+
+/// Householder reduction of a symmetric matrix (its lower triangle is
+/// read) to tridiagonal form with the same eigenvalues: the diagonal `d`
+/// and the off-diagonal `e` (`e[i]` couples `i` and `i + 1`; the last entry
+/// is zero). A direct method: `N - 2` reflections, no iteration.
+pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T; N]) {
+    let zero = T::zero();
+    let two = T::lit(2.0);
+    let mut a = *m;
+    let mut e = [zero; N];
+    for k in 0..N {
+        // x = a[k+1.., k]; the reflection maps it onto alpha e_1.
+        let mut norm2 = zero;
+        let mut big = zero;
+        for i in (k + 1)..N {
+            big = big.max(a[i][k].abs());
+        }
+        if !(big > zero) {
+            continue;
+        }
+        let mut v = [zero; N];
+        for i in (k + 1)..N {
+            v[i] = a[i][k] / big;
+            norm2 += v[i] * v[i];
+        }
+        let norm = norm2.sqrt();
+        let mut alpha = norm;
+        if let Some(first) = v.get_mut(k + 1) {
+            if *first > zero {
+                alpha = -norm;
+            }
+            *first -= alpha;
+        }
+        let vv: T = v.iter().fold(zero, |acc, &x| acc + x * x);
+        if !(vv > zero) {
+            continue;
+        }
+        // H = I - 2 v v^T / (v^T v); A <- H A H on rows/columns k+1..N:
+        // p = A v / vv, K = v^T p / vv, q = p - K v, A -= 2 (v q^T + q v^T) / ...
+        let mut p = [zero; N];
+        for i in (k + 1)..N {
+            let mut s = zero;
+            for j in (k + 1)..N {
+                s += a[i][j] * v[j];
+            }
+            p[i] = s / vv;
+        }
+        let mut kk = zero;
+        for i in (k + 1)..N {
+            kk += v[i] * p[i];
+        }
+        kk = kk / vv;
+        for i in (k + 1)..N {
+            p[i] -= kk * v[i];
+        }
+        for i in (k + 1)..N {
+            for j in (k + 1)..N {
+                a[i][j] -= two * (v[i] * p[j] + p[i] * v[j]);
+            }
+        }
+        // Column k below the subdiagonal is now zero; the subdiagonal entry
+        // is alpha, in the scale of the original column.
+        e[k] = alpha * big;
+    }
+    let mut d = [zero; N];
+    for i in 0..N {
+        d[i] = a[i][i];
+    }
+    (d, e)
+}
+
+/// Cholesky factor `L` (lower triangular, `a = L L^T`) of a symmetric
+/// positive definite matrix (its lower triangle is read), or `None` when a
+/// pivot is not positive and finite.
+pub(crate) fn cholesky<T: Real, const N: usize>(a: &Mat<T, N>) -> Option<Mat<T, N>> {
+    let mut l = [[T::zero(); N]; N];
+    for j in 0..N {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= l[j][k] * l[j][k];
+        }
+        if !(d > T::zero()) || !d.is_finite() {
+            return None;
+        }
+        let djj = d.sqrt();
+        l[j][j] = djj;
+        for i in (j + 1)..N {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            l[i][j] = s / djj;
+        }
+    }
+    Some(l)
+}
+
+/// Solves `L x = b` for a lower triangular `L` with a non-zero diagonal.
+pub(crate) fn solve_lower<T: Real, const N: usize>(l: &Mat<T, N>, b: &[T; N]) -> [T; N] {
+    let mut x = *b;
+    for i in 0..N {
+        let mut s = x[i];
+        for k in 0..i {
+            s -= l[i][k] * x[k];
+        }
+        x[i] = s / l[i][i];
+    }
+    x
+}
+
+/// Solves `L^T x = b` for a lower triangular `L` with a non-zero diagonal.
+pub(crate) fn solve_lower_transposed<T: Real, const N: usize>(l: &Mat<T, N>, b: &[T; N]) -> [T; N] {
+    let mut x = *b;
+    for i in (0..N).rev() {
+        let mut s = x[i];
+        for k in (i + 1)..N {
+            s -= l[k][i] * x[k];
+        }
+        x[i] = s / l[i][i];
+    }
+    x
+}
+
+/// Solves `L L^T x = b` from the Cholesky factor.
+pub(crate) fn cholesky_solve<T: Real, const N: usize>(l: &Mat<T, N>, b: &[T; N]) -> [T; N] {
+    solve_lower_transposed(l, &solve_lower(l, b))
+}
+
+/// `(L L^T)^-1` from the Cholesky factor (symmetric).
+pub(crate) fn cholesky_inverse<T: Real, const N: usize>(l: &Mat<T, N>) -> Mat<T, N> {
+    let mut inv = [[T::zero(); N]; N];
+    for j in 0..N {
+        let mut e = [T::zero(); N];
+        e[j] = T::one();
+        inv[j] = cholesky_solve(l, &e);
+    }
+    inv
+}
+
+/// Solves `a x = b` for a 3x3 matrix by Cramer's rule on the cofactors, or
+/// `None` when `a` is singular to working precision (relative to the size
+/// of its entries) or the result is not finite.
+pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
+    let c00 = a[1][1] * a[2][2] - a[1][2] * a[2][1];
+    let c01 = a[1][2] * a[2][0] - a[1][0] * a[2][2];
+    let c02 = a[1][0] * a[2][1] - a[1][1] * a[2][0];
+    let det = a[0][0] * c00 + a[0][1] * c01 + a[0][2] * c02;
+    let mut size = T::zero();
+    for row in a {
+        for &x in row {
+            size = size.max(x.abs());
+        }
+    }
+    if !(det.abs() > size * size * size * T::EPSILON) || !det.is_finite() {
+        return None;
+    }
+    let c10 = a[0][2] * a[2][1] - a[0][1] * a[2][2];
+    let c11 = a[0][0] * a[2][2] - a[0][2] * a[2][0];
+    let c12 = a[0][1] * a[2][0] - a[0][0] * a[2][1];
+    let c20 = a[0][1] * a[1][2] - a[0][2] * a[1][1];
+    let c21 = a[0][2] * a[1][0] - a[0][0] * a[1][2];
+    let c22 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    // x = adj(a) b / det, adj = cofactor matrix transposed.
+    let x = [
+        (c00 * b[0] + c10 * b[1] + c20 * b[2]) / det,
+        (c01 * b[0] + c11 * b[1] + c21 * b[2]) / det,
+        (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det,
+    ];
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// `V f(Lambda) V^T` for a symmetric positive definite 3x3 matrix, for two
+/// functions at once; [`Error::NotAnEllipsoid`] when an eigenvalue is not
+/// clearly positive.
+fn sym_functions<T: Real>(
+    m: &Matrix3<T>,
+    f: impl Fn(T) -> T,
+    g: impl Fn(T) -> T,
+) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
+    let eig = sym_eigen(&to_array(m))?;
+    let max = eig.max().abs();
     // A positive definite matrix whose smallest eigenvalue is lost in the
     // rounding of the largest is numerically singular.
     if !eig
-        .eigenvalues
+        .values
         .iter()
         .all(|&l| l > max * T::EPSILON * T::lit(8.0))
     {
         return Err(Error::NotAnEllipsoid);
     }
-    let v = &eig.eigenvectors;
-    let d = Vector3::from_fn(|i, _| f(eig.eigenvalues[i]));
-    // V D V^T is symmetric only to rounding; the canonical form is exactly so.
-    Ok((v * Matrix3::from_diagonal(&d) * v.transpose()).symmetric_part())
+    let mut fm = [[T::zero(); 3]; 3];
+    let mut gm = [[T::zero(); 3]; 3];
+    for (v, &l) in eig.vectors.iter().zip(&eig.values) {
+        let (fl, gl) = (f(l), g(l));
+        for i in 0..3 {
+            for j in i..3 {
+                let vv = v[i] * v[j];
+                fm[i][j] += fl * vv;
+                gm[i][j] += gl * vv;
+            }
+        }
+    }
+    // Exactly symmetric: the lower triangle mirrors the upper.
+    for i in 0..3 {
+        for j in 0..i {
+            fm[i][j] = fm[j][i];
+            gm[i][j] = gm[j][i];
+        }
+    }
+    Ok((from_array(fm), from_array(gm)))
 }
 
 /// `M^(1/2)` and `M^(-1/2)` from one eigen-decomposition.
 pub(crate) fn sym_sqrt_and_inv_sqrt<T: Real>(
     m: &Matrix3<T>,
 ) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
-    let eig = sym_eigen(m.symmetric_part())?;
-    let max = eig.eigenvalues.amax();
-    if !eig
-        .eigenvalues
-        .iter()
-        .all(|&l| l > max * T::EPSILON * T::lit(8.0))
-    {
-        return Err(Error::NotAnEllipsoid);
-    }
-    let v = &eig.eigenvectors;
-    let root = eig.eigenvalues.map(|l| l.sqrt());
-    let sqrt = v * Matrix3::from_diagonal(&root) * v.transpose();
-    let inv = v * Matrix3::from_diagonal(&root.map(|r| T::one() / r)) * v.transpose();
-    Ok((sqrt.symmetric_part(), inv.symmetric_part()))
+    sym_functions(m, |l| l.sqrt(), |l| T::one() / l.sqrt())
 }
 
 /// The symmetric positive definite square root `M^(1/2)`.
 pub(crate) fn sym_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    sym_function(m, |l| l.sqrt())
+    Ok(sym_functions(m, |l| l.sqrt(), |_| T::zero())?.0)
 }
 
 /// The symmetric positive definite inverse square root `M^(-1/2)`.
 pub(crate) fn sym_inv_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    sym_function(m, |l| T::one() / l.sqrt())
+    Ok(sym_functions(m, |l| T::one() / l.sqrt(), |_| T::zero())?.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::Rng;
+
+    /// A random symmetric matrix with chosen eigenvalues: `Q diag(l) Q^T`
+    /// with `Q` from Gram-Schmidt on random vectors.
+    fn with_spectrum<const N: usize>(rng: &mut Rng, l: &[f64; N]) -> Mat<f64, N> {
+        let mut q = [[0.0; N]; N];
+        for k in 0..N {
+            let mut v = [0.0; N];
+            for x in v.iter_mut() {
+                *x = rng.symmetric();
+            }
+            for prev in q.iter().take(k) {
+                let d: f64 = v.iter().zip(prev).map(|(a, b)| a * b).sum();
+                for (x, p) in v.iter_mut().zip(prev) {
+                    *x -= d * p;
+                }
+            }
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            for x in v.iter_mut() {
+                *x /= n;
+            }
+            q[k] = v;
+        }
+        let mut a = [[0.0; N]; N];
+        for i in 0..N {
+            for j in 0..N {
+                a[i][j] = (0..N).map(|k| q[k][i] * l[k] * q[k][j]).sum();
+            }
+        }
+        a
+    }
+
+    fn sorted<const N: usize>(mut v: [f64; N]) -> [f64; N] {
+        v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        v
+    }
+
+    #[test]
+    fn eigen_recovers_a_known_spectrum_with_relative_accuracy() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 7);
+        // Widely spread eigenvalues: Jacobi keeps even the smallest to a
+        // few ulps relative of itself.
+        let l = [1e-9, 3e-4, 0.5, 1.0, 2.0, 7.0, 1e3, 4e3, -2.0, 5e5];
+        let a = with_spectrum(&mut rng, &l);
+        let eig = sym_eigen(&a).unwrap();
+        let (got, want) = (sorted(eig.values), sorted(l));
+        for (g, w) in got.iter().zip(&want) {
+            // The matrix itself was formed with errors of eps * 5e5.
+            assert!((g - w).abs() <= 1e-9 * 5e5, "{got:?} vs {want:?}");
+        }
+        // A v = lambda v and orthonormality, independently of the values.
+        for (v, &lam) in eig.vectors.iter().zip(&eig.values) {
+            for i in 0..10 {
+                let av: f64 = (0..10).map(|j| a[i][j] * v[j]).sum();
+                assert!(
+                    (av - lam * v[i]).abs() < 1e-9,
+                    "residual {}",
+                    av - lam * v[i]
+                );
+            }
+        }
+        for p in 0..10 {
+            for q in 0..10 {
+                let d: f64 = (0..10).map(|i| eig.vectors[p][i] * eig.vectors[q][i]).sum();
+                let want = if p == q { 1.0 } else { 0.0 };
+                assert!((d - want).abs() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn eigenvalues_alone_match_the_full_decomposition() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 3);
+        for _ in 0..20 {
+            let l = [
+                rng.symmetric(),
+                rng.symmetric() * 10.0,
+                rng.symmetric() * 0.01,
+                1.0,
+            ];
+            let a = with_spectrum(&mut rng, &l);
+            let full = sym_eigen(&a).unwrap().values;
+            let alone = sym_eigenvalues(&a).unwrap();
+            assert_eq!(full, alone);
+            let (g, w) = (sorted(alone), sorted(l));
+            for (g, w) in g.iter().zip(&w) {
+                assert!((g - w).abs() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn eigen_handles_zero_huge_tiny_and_non_finite_matrices() {
+        let z = sym_eigen(&[[0.0f32; 3]; 3]).unwrap();
+        assert_eq!(z.values, [0.0; 3]);
+        let big =
+            sym_eigen(&[[1.5e38f32, 5e37, 0.0], [5e37, 1.5e38, 0.0], [0.0, 0.0, 1.0]]).unwrap();
+        let (lo, hi) = min_max(&big.values);
+        assert!(hi.is_finite() && (hi / 2e38 - 1.0).abs() < 1e-6, "{hi}");
+        assert!((lo - 1.0).abs() < 1e-6, "{lo}");
+        let tiny = f32::MIN_POSITIVE * 0.25; // subnormal
+        let t = sym_eigen(&[[tiny, 0.0, 0.0], [0.0, 2.0 * tiny, 0.0], [0.0, 0.0, tiny]]).unwrap();
+        assert_eq!(sorted(t.values.map(f64::from))[2], f64::from(2.0 * tiny));
+        for bad in [f32::NAN, f32::INFINITY] {
+            let mut m = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+            m[1][2] = bad;
+            assert_eq!(sym_eigen(&m).unwrap_err(), Error::SingularSystem);
+        }
+        // Degenerate spectrum (all equal) and a 2x2 rotation-only case.
+        let e = sym_eigen(&[[0.0, 1.0], [1.0, 0.0]]).unwrap();
+        assert_eq!(sorted(e.values), [-1.0, 1.0]);
+    }
+
+    #[test]
+    fn tridiagonal_form_keeps_the_spectrum() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 13);
+        let l = [1e-6, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 21.0];
+        let a = with_spectrum(&mut rng, &l);
+        let (d, e) = tridiagonal(&a);
+        assert_eq!(e[9], 0.0);
+        let mut t = [[0.0; 10]; 10];
+        for i in 0..10 {
+            t[i][i] = d[i];
+            if i < 9 {
+                t[i][i + 1] = e[i];
+                t[i + 1][i] = e[i];
+            }
+        }
+        let (got, want) = (sorted(sym_eigenvalues(&t).unwrap()), sorted(l));
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-13, "{got:?}");
+        }
+        // Already tridiagonal (and diagonal) input passes through.
+        let (d, e) = tridiagonal(&[[2.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 4.0]]);
+        assert_eq!((d, e), ([2.0, 3.0, 4.0], [0.0; 3]));
+    }
+
+    #[test]
+    fn cholesky_solves_and_inverts_and_refuses_indefinite_matrices() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 11);
+        let a = with_spectrum(&mut rng, &[0.01, 1.0, 3.0, 40.0, 2.0, 0.5]);
+        let l = cholesky(&a).unwrap();
+        let b = [1.0, -2.0, 0.5, 3.0, 0.0, 1.5];
+        let x = cholesky_solve(&l, &b);
+        for i in 0..6 {
+            let ax: f64 = (0..6).map(|j| a[i][j] * x[j]).sum();
+            assert!((ax - b[i]).abs() < 1e-10);
+        }
+        let inv = cholesky_inverse(&l);
+        for i in 0..6 {
+            for j in 0..6 {
+                let p: f64 = (0..6).map(|k| a[i][k] * inv[k][j]).sum();
+                assert!((p - if i == j { 1.0 } else { 0.0 }).abs() < 1e-10);
+            }
+        }
+        let indefinite = with_spectrum(&mut rng, &[1.0, -0.1, 2.0]);
+        assert!(cholesky(&indefinite).is_none());
+        assert!(cholesky(&[[f64::NAN]]).is_none());
+        assert!(cholesky(&[[0.0]]).is_none());
+    }
+
+    #[test]
+    fn solve3_inverts_and_refuses_singular_matrices() {
+        let a = [[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, -4.0]];
+        let b = [1.0, 2.0, 3.0];
+        let x = solve3(&a, &b).unwrap();
+        for i in 0..3 {
+            let ax: f64 = (0..3).map(|j| a[i][j] * x[j]).sum();
+            assert!((ax - b[i]).abs() < 1e-14);
+        }
+        let singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]];
+        assert!(solve3(&singular, &b).is_none());
+        assert!(solve3(&[[f64::INFINITY, 0.0, 0.0], [0.0; 3], [0.0; 3]], &b).is_none());
+    }
+
+    #[test]
+    fn square_roots_are_inverse_and_square_to_the_matrix() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 5);
+        let a = from_array(with_spectrum(&mut rng, &[0.3, 1.0, 2.5]));
+        let (r, ri) = sym_sqrt_and_inv_sqrt(&a).unwrap();
+        assert!((r * r - a).norm() < 1e-13);
+        assert!((r * ri - Matrix3::identity()).norm() < 1e-13);
+        assert_eq!(r, r.transpose());
+        assert!((sym_sqrt(&a).unwrap() - r).norm() < 1e-15);
+        assert!((sym_inv_sqrt(&a).unwrap() - ri).norm() < 1e-15);
+        let indefinite = from_array(with_spectrum(&mut rng, &[0.3, -1.0, 2.5]));
+        assert_eq!(sym_sqrt(&indefinite).unwrap_err(), Error::NotAnEllipsoid);
+    }
 }

@@ -5,9 +5,9 @@
 //! that justify them are documented beside each constant. Refusals are
 //! [`Error`]s; milder findings are [`Warning`]s in the report.
 
-use nalgebra::{Matrix3, Matrix4, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, SMatrix, Vector3};
 
-use crate::linalg::sym_eigen;
+use crate::linalg::{min_max, sym_eigenvalues, to_array, tridiagonal};
 use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
 use crate::sample::{finite, Sample};
@@ -100,12 +100,11 @@ pub(crate) fn flatness<T: Real>(m: &Moments<T>, count: usize) -> Result<T, Error
         m.get(0, 0, 2),
     ) / n;
     let cov = second - mean * mean.transpose();
-    let eig = sym_eigen(cov)?;
-    let max = eig.eigenvalues.max();
+    let (min, max) = min_max(&sym_eigenvalues(&to_array(&cov))?);
     if !(max > T::zero()) {
         return Err(Error::AllSamplesEqual);
     }
-    Ok(eig.eigenvalues.min().max(T::zero()) / max)
+    Ok(min.max(T::zero()) / max)
 }
 
 /// `lambda_1 / lambda_0` of the normalised scatter (two smallest
@@ -121,14 +120,13 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
     if !scatter.iter().all(|v| v.is_finite()) {
         return Err(Error::OutOfRange);
     }
-    let tri = nalgebra::linalg::SymmetricTridiagonal::new(*scatter);
-    let (d, e) = (tri.diagonal(), tri.off_diagonal());
+    let (d, e) = tridiagonal(&to_array(scatter));
     // Gershgorin bound on the spectrum of the tridiagonal matrix.
     let mut top = T::zero();
-    for i in 0..10 {
-        let left = if i > 0 { e[i - 1].abs() } else { T::zero() };
-        let right = if i < 9 { e[i].abs() } else { T::zero() };
-        top = top.max(d[i].abs() + left + right);
+    let mut left = T::zero();
+    for (&di, &ei) in d.iter().zip(&e) {
+        top = top.max(di.abs() + left + ei.abs());
+        left = ei.abs();
     }
     if !(top > T::zero()) || !top.is_finite() {
         return Err(Error::AllSamplesEqual);
@@ -142,13 +140,14 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
 /// Number of eigenvalues below `x` of the symmetric tridiagonal matrix with
 /// diagonal `d` and off-diagonal `e` (Sturm sequence: the negative pivots
 /// of the LDL^T factorisation of the matrix minus `x`).
-fn count_below<T: Real>(d: &SVector<T, 10>, e: &SVector<T, 9>, x: T, tiny: T) -> usize {
+fn count_below<T: Real>(d: &[T; 10], e: &[T; 10], x: T, tiny: T) -> usize {
     let mut count = 0;
-    let mut q = d[0] - x;
-    for i in 0..10 {
-        if i > 0 {
-            q = d[i] - x - e[i - 1] * e[i - 1] / q;
-        }
+    // e[i - 1]^2, the coupling to the previous row (none for the first).
+    let mut coupling = T::zero();
+    let mut q = T::one();
+    for (&di, &ei) in d.iter().zip(e) {
+        q = di - x - coupling / q;
+        coupling = ei * ei;
         if q.abs() < tiny {
             // A zero pivot: perturb it (the standard remedy).
             q = -tiny;
@@ -163,7 +162,7 @@ fn count_below<T: Real>(d: &SVector<T, 10>, e: &SVector<T, 9>, x: T, tiny: T) ->
 /// The `k`-th smallest eigenvalue (0-based) by bisection on `[-top, top]`,
 /// to a relative accuracy of 1e-3 or an absolute one of `floor`; at most
 /// 200 halvings (from `top` to `floor` takes about 60 in `f64`).
-fn kth_eigenvalue<T: Real>(d: &SVector<T, 10>, e: &SVector<T, 9>, k: usize, top: T, floor: T) -> T {
+fn kth_eigenvalue<T: Real>(d: &[T; 10], e: &[T; 10], k: usize, top: T, floor: T) -> T {
     let (mut lo, mut hi) = (-top, top);
     let tiny = floor * T::EPSILON;
     let half = T::lit(0.5);
@@ -183,8 +182,7 @@ fn kth_eigenvalue<T: Real>(d: &SVector<T, 10>, e: &SVector<T, 9>, k: usize, top:
 
 /// Condition number of `M = W^2` for a symmetric positive definite `W`.
 pub(crate) fn distortion<T: Real>(w: &Matrix3<T>) -> Result<T, Error> {
-    let eig = sym_eigen(*w)?;
-    let (lo, hi) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+    let (lo, hi) = min_max(&sym_eigenvalues(&to_array(w))?);
     if !(lo > T::zero()) {
         return Err(Error::NotAnEllipsoid);
     }
@@ -260,15 +258,17 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     let n = T::from_count(count);
     let mean = s_h / n;
     let cov = s_hh / n - mean * mean.transpose();
-    let coverage = sym_eigen(cov)?.eigenvalues.min();
-    let mut g = Matrix4::zeros();
-    g.fixed_view_mut::<3, 3>(0, 0).copy_from(&(s_hh / n));
-    g.fixed_view_mut::<3, 1>(0, 3).copy_from(&mean);
-    g.fixed_view_mut::<1, 3>(3, 0).copy_from(&mean.transpose());
-    g[(3, 3)] = one;
-    let ge = sym_eigen(g)?.eigenvalues;
-    let gram_condition = if ge.min() > T::zero() {
-        ge.max() / ge.min()
+    let (coverage, _) = min_max(&sym_eigenvalues(&to_array(&cov))?);
+    let second = s_hh / n;
+    let g = [
+        [second[(0, 0)], second[(0, 1)], second[(0, 2)], mean.x],
+        [second[(1, 0)], second[(1, 1)], second[(1, 2)], mean.y],
+        [second[(2, 0)], second[(2, 1)], second[(2, 2)], mean.z],
+        [mean.x, mean.y, mean.z, one],
+    ];
+    let (gmin, gmax) = min_max(&sym_eigenvalues(&g)?);
+    let gram_condition = if gmin > T::zero() {
+        gmax / gmin
     } else {
         T::max_value().unwrap_or(T::one())
     };

@@ -19,11 +19,13 @@
 //! differences come from solver tolerances. The host tests check this
 //! against an independent closed-form ADC2.
 
-use nalgebra::{Cholesky, Matrix3, Matrix3x4, Matrix4, SVector};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector};
 
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{sym_eigen, sym_inv_sqrt};
+use crate::linalg::{
+    cholesky, cholesky_inverse, from_array, min_max, sym_eigenvalues, sym_inv_sqrt, to_array,
+};
 use crate::methods::adc2::{check_gram, options, theta, PARAMS};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
@@ -89,10 +91,9 @@ fn weight<T: Real>(
         }
         None => stats.residual_covariance(),
     };
-    let inv = Cholesky::new(sigma)
-        .ok_or(Error::InvalidNoiseCovariance)?
-        .inverse();
-    let top = sym_eigen(inv)?.eigenvalues.amax();
+    let l = cholesky(&to_array(&sigma)).ok_or(Error::InvalidNoiseCovariance)?;
+    let inv = from_array(cholesky_inverse(&l));
+    let (_, top) = min_max(&sym_eigenvalues(&to_array(&inv))?);
     if !(top > T::zero()) || !top.is_finite() {
         return Err(Error::InvalidNoiseCovariance);
     }

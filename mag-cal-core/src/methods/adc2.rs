@@ -20,7 +20,7 @@ use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{sym_eigen, sym_inv_sqrt};
+use crate::linalg::{cholesky, cholesky_solve, min_max, sym_eigenvalues, sym_inv_sqrt, to_array};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
@@ -87,8 +87,8 @@ pub struct Adc2Solution<T: Real> {
 /// is not unique (all `h_i` on one plane through the centre, or equal).
 /// Weak-but-regular geometry is judged by the quality checks, not here.
 pub(crate) fn check_gram<T: Real>(g: &Matrix4<T>) -> Result<(), Error> {
-    let eig = sym_eigen(*g)?;
-    if eig.eigenvalues.min() > eig.eigenvalues.amax() * T::EPSILON * T::lit(64.0) {
+    let (lo, hi) = min_max(&sym_eigenvalues(&to_array(g))?);
+    if lo > hi.abs() * T::EPSILON * T::lit(64.0) {
         Ok(())
     } else {
         Err(Error::SingularSystem)
@@ -141,9 +141,17 @@ pub fn solve_closed_form<T: Real>(
 ) -> Result<Adc2Solution<T>, Error> {
     let g = stats.gram();
     check_gram(&g)?;
-    let chol = nalgebra::Cholesky::new(g).ok_or(Error::SingularSystem)?;
-    // Theta G = Q  <=>  G Theta^T = Q^T (G symmetric).
-    let th = chol.solve(&stats.q().transpose()).transpose();
+    let l = cholesky(&to_array(&g)).ok_or(Error::SingularSystem)?;
+    // Theta G = Q  <=>  G Theta^T = Q^T (G symmetric): row r of Theta
+    // solves G x = (row r of Q).
+    let q = stats.q();
+    let mut th = Matrix3x4::zeros();
+    for r in 0..3 {
+        let x = cholesky_solve(&l, &[q[(r, 0)], q[(r, 1)], q[(r, 2)], q[(r, 3)]]);
+        for (c, &v) in x.iter().enumerate() {
+            th[(r, c)] = v;
+        }
+    }
     let objective = Adc2Objective::new(stats);
     let (cost, _) = objective.cost_grad(&SVector::from_column_slice(th.as_slice()));
     Ok(Adc2Solution {

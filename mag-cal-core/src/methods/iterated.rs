@@ -18,11 +18,11 @@
 //! for plain iteration to the same tolerance. The pass cap
 //! ([`crate::Config::max_passes`]) ends it with [`Warning::PassCap`].
 
-use nalgebra::{Cholesky, Matrix3, SVector, Vector3};
+use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::sym_inv_sqrt;
+use crate::linalg::{cholesky, cholesky_inverse, from_array, sym_inv_sqrt, to_array};
 use crate::methods::{adc2, Estimate};
 use crate::normalize::Normalization;
 use crate::quasi_newton::Anderson;
@@ -132,7 +132,7 @@ pub fn run<T: Real, S: Sample>(
         let next = accel.step(&x, &g);
         // An extrapolated W' must stay positive definite; else take the
         // plain step and start the history afresh.
-        x = if Cholesky::new(unpack(&next).0).is_some() {
+        x = if cholesky(&to_array(&unpack(&next).0)).is_some() {
             next
         } else {
             accel.reset();
@@ -153,5 +153,6 @@ pub fn run<T: Real, S: Sample>(
 
 /// Inverse of a symmetric positive definite matrix.
 fn inverse<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    Ok(Cholesky::new(*m).ok_or(Error::NotAnEllipsoid)?.inverse())
+    let l = cholesky(&to_array(m)).ok_or(Error::NotAnEllipsoid)?;
+    Ok(from_array(cholesky_inverse(&l)))
 }

@@ -25,10 +25,10 @@
 //! costs many times ADC2's. The diagonal of `A` needs no sign constraint:
 //! `J` depends on `A` only through `M`.
 
-use nalgebra::{Cholesky, Matrix3, SVector, Vector3};
+use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::sym_sqrt;
+use crate::linalg::{cholesky, from_array, sym_sqrt, to_array};
 use crate::methods::Estimate;
 use crate::moments::BLOCK;
 use crate::normalize::Normalization;
@@ -110,10 +110,9 @@ pub fn run<T: Real, S: Sample>(
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
     // A0^T A0 = M' with A0 upper triangular: the transposed Cholesky factor.
-    let a0 = Cholesky::new(ls.m)
-        .ok_or(Error::NotAnEllipsoid)?
-        .unpack()
-        .transpose();
+    // The array factor is L[row][column]; read as nalgebra's column-major
+    // storage it is L^T, the upper factor.
+    let a0 = from_array(cholesky(&to_array(&ls.m)).ok_or(Error::NotAnEllipsoid)?);
     let x0 = pack(&a0, &ls.centre);
     let objective = SubMleObjective::new(samples, norm);
     // The paper's stop: a step below 1e-6 of the parameter scale. The
