@@ -120,38 +120,74 @@ pub fn procrustes<T: Real>(
     if !(b_max > T::zero()) || !b_max.is_finite() {
         return Err(Error::SingularSystem);
     }
-    rotation_from_b(&(b / b_max))
+    let b: Columns<T> = b.into();
+    rotation_from_b(&b.map(|column| column.map(|x| x / b_max)))
+}
+
+/// A 3x3 matrix as its three columns (column-major, as nalgebra's
+/// `From<[[T; 3]; 3]>` takes it). The SVD works on this form, with literal
+/// indices only, so that no bounds-check or nalgebra assertion survives
+/// optimisation (see `no-panic-check/`).
+type Columns<T> = [[T; 3]; 3];
+
+/// `x . y`.
+#[inline(always)]
+fn dot<T: Real>(x: &[T; 3], y: &[T; 3]) -> T {
+    x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+}
+
+/// `|x|` (the square root of the squared norm, as nalgebra's `norm`).
+#[inline(always)]
+fn norm<T: Real>(x: &[T; 3]) -> T {
+    dot(x, x).sqrt()
+}
+
+/// `x x y`.
+#[inline(always)]
+fn cross<T: Real>(x: &[T; 3], y: &[T; 3]) -> [T; 3] {
+    [
+        x[1] * y[2] - x[2] * y[1],
+        x[2] * y[0] - x[0] * y[2],
+        x[0] * y[1] - x[1] * y[0],
+    ]
 }
 
 /// `Q = U diag(1, 1, det(U V^T)) V^T` for `B = U S V^T`, `max |B_jk| = 1`.
-fn rotation_from_b<T: Real>(b: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
+fn rotation_from_b<T: Real>(b: &Columns<T>) -> Result<Matrix3<T>, Error> {
     let (a, v) = jacobi_svd(b)?;
-    // Columns of `a = B V` are `s_k u_k`; order them by decreasing norm.
-    let norms = [a.column(0).norm(), a.column(1).norm(), a.column(2).norm()];
-    let [i1, i2, i3] = descending(norms);
-    let (s1, s2, s3) = (
-        norm_at(&norms, i1),
-        norm_at(&norms, i2),
-        norm_at(&norms, i3),
-    );
+    // Columns of `a = B V` are `s_k u_k`; order them, with the matching
+    // columns of `V`, by decreasing norm.
+    let [a1, a2, a3] = a;
+    let [v1, v2, v3] = v;
+    let mut sorted = [
+        (norm(&a1), a1, v1),
+        (norm(&a2), a2, v2),
+        (norm(&a3), a3, v3),
+    ];
+    descending(&mut sorted);
+    let [(s1, a1, v1), (s2, a2, v2), (s3, a3, v3)] = sorted;
     if !(s1 > T::zero()) {
         return Err(Error::SingularSystem);
     }
-    let u1 = a.column(i1) / s1;
-    let a2 = a.column(i2).clone_owned();
-    let u2 = a2 - u1 * u1.dot(&a2);
-    let u2_norm = u2.norm();
+    let u1 = a1.map(|x| x / s1);
+    let proj = dot(&u1, &a2);
+    let u2 = [
+        a2[0] - u1[0] * proj,
+        a2[1] - u1[1] * proj,
+        a2[2] - u1[2] * proj,
+    ];
+    let u2_norm = norm(&u2);
     // A right-handed U = [u1, u2, u1 x u2]; B's own third left singular
     // vector is sigma (u1 x u2), sigma = +-1 (arbitrary when s3 = 0).
-    let u2 = u2 / u2_norm;
-    let u3 = u1.cross(&u2);
-    let sigma = if a.column(i3).dot(&u3) < T::zero() {
+    let u2 = u2.map(|x| x / u2_norm);
+    let u3 = cross(&u1, &u2);
+    let sigma = if dot(&a3, &u3) < T::zero() {
         -T::one()
     } else {
         T::one()
     };
-    let v_sorted = Matrix3::from_columns(&[v.column(i1), v.column(i2), v.column(i3)]);
-    let v_det = if v_sorted.determinant() < T::zero() {
+    // det [v1, v2, v3] = v1 . (v2 x v3).
+    let v_det = if dot(&v1, &cross(&v2, &v3)) < T::zero() {
         -T::one()
     } else {
         T::one()
@@ -163,84 +199,70 @@ fn rotation_from_b<T: Real>(b: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
     if !(u2_norm > T::zero()) || !(curvature > s1 * T::EPSILON.sqrt()) {
         return Err(Error::SingularSystem);
     }
-    // U diag(1, 1, d) V^T = [u1, u2, sigma d u3] V^T = [u1, u2, det(V) u3] V^T.
-    let q = Matrix3::from_columns(&[u1, u2, u3 * v_det]) * v_sorted.transpose();
-    if q.iter().all(|x| x.is_finite()) {
-        Ok(q)
+    // U diag(1, 1, d) V^T = [u1, u2, sigma d u3] V^T = [u1, u2, det(V) u3] V^T;
+    // its column l is u1 v1[l] + u2 v2[l] + det(V) u3 v3[l].
+    let u3 = u3.map(|x| x * v_det);
+    let column = |l: [T; 3]| -> [T; 3] {
+        [
+            u1[0] * l[0] + u2[0] * l[1] + u3[0] * l[2],
+            u1[1] * l[0] + u2[1] * l[1] + u3[1] * l[2],
+            u1[2] * l[0] + u2[2] * l[1] + u3[2] * l[2],
+        ]
+    };
+    // Row l of V (the l-th components of v1, v2, v3).
+    let q: Columns<T> = [
+        column([v1[0], v2[0], v3[0]]),
+        column([v1[1], v2[1], v3[1]]),
+        column([v1[2], v2[2], v3[2]]),
+    ];
+    if q.iter().flatten().all(|x| x.is_finite()) {
+        Ok(Matrix3::from(q))
     } else {
         Err(Error::SingularSystem)
     }
 }
 
-/// Element `i` of a 3-array, or zero (never reached: indices come from
-/// [`descending`]).
-fn norm_at<T: Real>(norms: &[T; 3], i: usize) -> T {
-    norms.get(i).copied().unwrap_or_else(T::zero)
+/// Sorts three `(norm, ..)` entries by decreasing norm: three
+/// compare-and-swap steps on disjoint references (no index at all).
+fn descending<T: Real, C>(x: &mut [(T, C, C); 3]) {
+    fn order<T: Real, C>(first: &mut (T, C, C), second: &mut (T, C, C)) {
+        if first.0 < second.0 {
+            core::mem::swap(first, second);
+        }
+    }
+    let [a, b, c] = x;
+    order(a, b);
+    order(b, c);
+    order(a, b);
 }
 
-/// Indices of three values by decreasing value.
-fn descending<T: Real>(x: [T; 3]) -> [usize; 3] {
-    // Three compare-and-swap steps sort three elements (constant indices:
-    // no bounds-check path).
-    let [mut a, mut b, mut c] = [0, 1, 2];
-    if norm_at(&x, a) < norm_at(&x, b) {
-        core::mem::swap(&mut a, &mut b);
-    }
-    if norm_at(&x, b) < norm_at(&x, c) {
-        core::mem::swap(&mut b, &mut c);
-    }
-    if norm_at(&x, a) < norm_at(&x, b) {
-        core::mem::swap(&mut a, &mut b);
-    }
-    [a, b, c]
-}
-
-/// One-sided Jacobi SVD of a finite 3x3 matrix with entries of at most 1 in
-/// magnitude: returns `(A, V)` with `V` orthogonal and `A = B V`, whose
-/// columns are mutually orthogonal, so that `A = U S` column by column.
+/// One-sided Jacobi SVD of a finite 3x3 matrix (as columns) with entries of
+/// at most 1 in magnitude: returns `(A, V)` (as columns) with `V` orthogonal
+/// and `A = B V`, whose columns are mutually orthogonal, so that `A = U S`
+/// column by column.
 ///
 /// A column shorter than `eps |B|_F` is left as it is: at that size its
 /// direction is rounding noise, and chasing it (its squared norm may
 /// underflow) could keep the iteration from ever stopping.
-fn jacobi_svd<T: Real>(b: &Matrix3<T>) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
+fn jacobi_svd<T: Real>(b: &Columns<T>) -> Result<(Columns<T>, Columns<T>), Error> {
+    let (zero, one) = (T::zero(), T::one());
     let mut a = *b;
-    let mut v = Matrix3::identity();
+    let mut v = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
     // Columns count as orthogonal when their cosine is below a few rounding
     // errors of a 3-term dot product.
     let tol = T::EPSILON * T::lit(8.0);
     // |B|_F = |A|_F throughout (the rotations preserve it).
-    let negligible = T::EPSILON * b.norm();
-    let one = T::one();
-    let two = T::lit(2.0);
+    let negligible =
+        T::EPSILON * (dot(&b[0], &b[0]) + dot(&b[1], &b[1]) + dot(&b[2], &b[2])).sqrt();
     for _ in 0..MAX_SWEEPS {
-        let mut rotated = false;
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            let (norm_p, norm_q) = (a.column(p).norm(), a.column(q).norm());
-            if !(norm_p > negligible && norm_q > negligible) {
-                continue;
-            }
-            let gamma = a.column(p).dot(&a.column(q));
-            if !(gamma.abs() > tol * norm_p * norm_q) {
-                continue;
-            }
-            rotated = true;
-            // The rotation that zeroes the (p, q) entry of A^T A:
-            // t = tan(theta) the smaller root of t^2 + 2 zeta t - 1 = 0.
-            let zeta = (norm_q - norm_p) * (norm_q + norm_p) / (two * gamma);
-            let abs_zeta = zeta.abs();
-            // sqrt(1 + zeta^2) without overflow for a huge zeta.
-            let root = if abs_zeta > one {
-                abs_zeta * (one + (one / abs_zeta) * (one / abs_zeta)).sqrt()
-            } else {
-                (one + abs_zeta * abs_zeta).sqrt()
-            };
-            let t = if zeta < T::zero() { -one } else { one } / (abs_zeta + root);
-            let c = one / (one + t * t).sqrt();
-            let s = c * t;
-            rotate_columns(&mut a, p, q, c, s);
-            rotate_columns(&mut v, p, q, c, s);
-        }
-        if !rotated {
+        // The three column pairs (0, 1), (0, 2), (1, 2), as disjoint
+        // references: each call sees its own two columns of A and of V.
+        let [a0, a1, a2] = &mut a;
+        let [v0, v1, v2] = &mut v;
+        let r01 = jacobi_rotation(a0, a1, v0, v1, tol, negligible);
+        let r02 = jacobi_rotation(a0, a2, v0, v2, tol, negligible);
+        let r12 = jacobi_rotation(a1, a2, v1, v2, tol, negligible);
+        if !(r01 || r02 || r12) {
             return Ok((a, v));
         }
     }
@@ -249,12 +271,59 @@ fn jacobi_svd<T: Real>(b: &Matrix3<T>) -> Result<(Matrix3<T>, Matrix3<T>), Error
     })
 }
 
-/// Columns `(p, q)` of `m` become `(c m_p - s m_q, s m_p + c m_q)`.
-fn rotate_columns<T: Real>(m: &mut Matrix3<T>, p: usize, q: usize, c: T, s: T) {
-    let mp = m.column(p).clone_owned();
-    let mq = m.column(q).clone_owned();
-    m.set_column(p, &(mp * c - mq * s));
-    m.set_column(q, &(mp * s + mq * c));
+/// One Jacobi step on the column pair `(p, q)` of `A` (and of `V`): rotates
+/// both pairs so that `a_p . a_q = 0`, unless the columns are already
+/// orthogonal to `tol` or one is below `negligible`. Returns whether it
+/// rotated.
+fn jacobi_rotation<T: Real>(
+    ap: &mut [T; 3],
+    aq: &mut [T; 3],
+    vp: &mut [T; 3],
+    vq: &mut [T; 3],
+    tol: T,
+    negligible: T,
+) -> bool {
+    let one = T::one();
+    let (norm_p, norm_q) = (norm(ap), norm(aq));
+    if !(norm_p > negligible && norm_q > negligible) {
+        return false;
+    }
+    let gamma = dot(ap, aq);
+    if !(gamma.abs() > tol * norm_p * norm_q) {
+        return false;
+    }
+    // The rotation that zeroes the (p, q) entry of A^T A:
+    // t = tan(theta) the smaller root of t^2 + 2 zeta t - 1 = 0.
+    let zeta = (norm_q - norm_p) * (norm_q + norm_p) / (T::lit(2.0) * gamma);
+    let abs_zeta = zeta.abs();
+    // sqrt(1 + zeta^2) without overflow for a huge zeta.
+    let root = if abs_zeta > one {
+        abs_zeta * (one + (one / abs_zeta) * (one / abs_zeta)).sqrt()
+    } else {
+        (one + abs_zeta * abs_zeta).sqrt()
+    };
+    let t = if zeta < T::zero() { -one } else { one } / (abs_zeta + root);
+    let c = one / (one + t * t).sqrt();
+    let s = c * t;
+    rotate_columns(ap, aq, c, s);
+    rotate_columns(vp, vq, c, s);
+    true
+}
+
+/// Columns `(p, q)` become `(c p - s q, s p + c q)`.
+#[inline(always)]
+fn rotate_columns<T: Real>(p: &mut [T; 3], q: &mut [T; 3], c: T, s: T) {
+    let (mp, mq) = (*p, *q);
+    *p = [
+        mp[0] * c - mq[0] * s,
+        mp[1] * c - mq[1] * s,
+        mp[2] * c - mq[2] * s,
+    ];
+    *q = [
+        mp[0] * s + mq[0] * c,
+        mp[1] * s + mq[1] * c,
+        mp[2] * s + mq[2] * c,
+    ];
 }
 
 /// A calibration followed by a fixed rotation into a reference frame:
@@ -616,7 +685,8 @@ mod tests {
         }
         for (k, b) in cases.iter().enumerate() {
             let b = b / b.amax().max(f64::MIN_POSITIVE);
-            let (a, v) = jacobi_svd(&b).unwrap_or_else(|e| panic!("{k}: {e:?} {b}"));
+            let (a, v) = jacobi_svd(&b.into()).unwrap_or_else(|e| panic!("{k}: {e:?} {b}"));
+            let (a, v) = (Matrix3::from(a), Matrix3::from(v));
             assert!((v.transpose() * v - Matrix3::identity()).amax() < 1e-14);
             assert!((b * v - a).amax() < 1e-14);
             let negligible = f64::EPSILON * b.norm();
@@ -627,8 +697,27 @@ mod tests {
                 }
             }
             let b32 = b.cast::<f32>();
-            let (a32, v32) = jacobi_svd(&b32).unwrap_or_else(|e| panic!("f32 {k}: {e:?} {b32}"));
+            let (a32, v32) =
+                jacobi_svd(&b32.into()).unwrap_or_else(|e| panic!("f32 {k}: {e:?} {b32}"));
+            let (a32, v32) = (Matrix3::from(a32), Matrix3::from(v32));
             assert!((b32 * v32 - a32).amax() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn descending_sorts_every_order_and_keeps_the_payload() {
+        let perms = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        for p in perms {
+            let mut x = p.map(|k| (f64::from(k), k, 10 * k));
+            descending(&mut x);
+            assert_eq!(x, [(2.0, 2, 20), (1.0, 1, 10), (0.0, 0, 0)]);
         }
     }
 
