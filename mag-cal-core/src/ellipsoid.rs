@@ -117,6 +117,7 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// Cholesky fails, a ridge of 16 ulps of its trace keeps it defined and moves
 /// the solution by about that relative amount. (Always adding the ridge cost
 /// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
+#[allow(clippy::needless_range_loop)] // matrix notation, as in linalg
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);
     let zero = T::zero();

@@ -11,6 +11,10 @@
 //! iteration is capped. Matrices are symmetric where it matters, so the
 //! row/column order of nalgebra's column-major storage does not.
 
+// Index loops are the matrix notation here (`a[i][k] * x[k]`); zipped
+// iterators over rows and columns would hide it.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{ArrayStorage, Matrix3, SMatrix};
 
 use crate::{Error, Real};
@@ -273,7 +277,7 @@ pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T
         for i in (k + 1)..N {
             kk += v[i] * p[i];
         }
-        kk = kk / vv;
+        kk /= vv;
         for i in (k + 1)..N {
             p[i] -= kk * v[i];
         }
