@@ -6,7 +6,7 @@
 //! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
-//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, the QEMU run and the fault run |
+//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //!
 //! Each step prints what it runs; the first failing step ends the run with
@@ -171,7 +171,12 @@ fn test_all() -> Result<(), String> {
     let fw = firmware_dir();
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
     qemu_demo()?;
-    qemu_faults()
+    qemu_faults()?;
+    // The link proof that no panic path is reachable from the core's API
+    // (docs/robustness.md).
+    let proof = root().join("no-panic-check").join("check.sh");
+    let proof = proof.to_str().ok_or("check.sh: path is not UTF-8")?;
+    run(&root(), "bash", &[proof, "--no-list"])
 }
 
 /// The benchmarks: instruction counts and footprint on the emulated

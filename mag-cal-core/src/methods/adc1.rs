@@ -26,7 +26,7 @@ use crate::ellipsoid::Ellipsoid;
 use crate::linalg::{
     cholesky, cholesky_inverse, from_array, min_max, sym_eigenvalues, sym_inv_sqrt, to_array,
 };
-use crate::methods::adc2::{check_gram, options, theta, PARAMS};
+use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, Objective};
@@ -121,9 +121,10 @@ pub fn run<T: Real, S: Sample>(
     opts.step_tol = T::EPSILON * T::lit(16.0);
     let m = bfgs(&objective, SVector::zeros(), &opts)?;
     let th = theta(&m.x);
-    let t = ls.t + th.fixed_view::<3, 3>(0, 0);
+    let (dt, db) = split(&th);
+    let t = ls.t + dt;
     Ok(Estimate {
-        centre: ls.centre + th.column(3),
+        centre: ls.centre + db,
         w: sym_inv_sqrt(&(t * t.transpose()))?,
         iterations: m.iterations,
         passes: 1,

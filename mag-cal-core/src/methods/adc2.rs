@@ -16,7 +16,7 @@
 //! BFGS reaches it in at most a few iterations because `H` has only four
 //! distinct eigenvalues.
 
-use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
+use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
@@ -47,6 +47,16 @@ impl<T: Real> Adc2Objective<T> {
             g: stats.gram(),
         }
     }
+}
+
+/// `Theta = [dT | db]` split into the correction of `T` and of the centre
+/// (whole columns of the storage: no view, no index check).
+pub(crate) fn split<T: Real>(th: &Matrix3x4<T>) -> (Matrix3<T>, Vector3<T>) {
+    let [c0, c1, c2, c3] = th.data.0;
+    (
+        Matrix3::from_data(ArrayStorage([c0, c1, c2])),
+        Vector3::from(c3),
+    )
 }
 
 /// The 3x4 matrix `Theta` held column-major in a parameter vector.
@@ -123,8 +133,8 @@ pub fn solve<T: Real>(
     let m = bfgs(&objective, SVector::zeros(), &opts)?;
     let th = theta(&m.x);
     Ok(Adc2Solution {
-        t: t0 + th.fixed_view::<3, 3>(0, 0),
-        centre: centre0 + th.column(3),
+        t: t0 + split(&th).0,
+        centre: centre0 + split(&th).1,
         iterations: m.iterations,
         cost: m.cost,
     })
@@ -155,8 +165,8 @@ pub fn solve_closed_form<T: Real>(
     let objective = Adc2Objective::new(stats);
     let (cost, _) = objective.cost_grad(&SVector::from_column_slice(th.as_slice()));
     Ok(Adc2Solution {
-        t: t0 + th.fixed_view::<3, 3>(0, 0),
-        centre: centre0 + th.column(3),
+        t: t0 + split(&th).0,
+        centre: centre0 + split(&th).1,
         iterations: 0,
         cost,
     })
