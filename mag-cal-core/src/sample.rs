@@ -13,42 +13,58 @@ pub trait Sample: Copy {
     /// fit the working precision (an `f64` of `1e300` read as `f32`) becomes
     /// non-finite and the sample is then skipped and counted as dropped.
     fn xyz<T: Real>(&self) -> [T; 3];
+
+    /// Whether [`Sample::xyz`] is finite for every value of the type, in
+    /// both working precisions (true of the integer types). The passes then
+    /// skip the per-sample finiteness check. Defaults to `false`: a type that
+    /// claims `true` wrongly feeds non-finite values into the sums.
+    const ALWAYS_FINITE: bool = false;
 }
+
+// The conversions are written out per component: `<[_; 3]>::map` compiles
+// to a loop through the stack at opt-level "s", in every per-sample pass.
 
 impl Sample for [f32; 3] {
     #[inline]
     fn xyz<T: Real>(&self) -> [T; 3] {
-        self.map(T::from_single)
+        let [x, y, z] = *self;
+        [T::from_single(x), T::from_single(y), T::from_single(z)]
     }
 }
 
 impl Sample for [f64; 3] {
     #[inline]
     fn xyz<T: Real>(&self) -> [T; 3] {
-        self.map(T::lit)
+        let [x, y, z] = *self;
+        [T::lit(x), T::lit(y), T::lit(z)]
     }
 }
 
 impl Sample for [i16; 3] {
     #[inline]
     fn xyz<T: Real>(&self) -> [T; 3] {
-        self.map(|v| T::from_single(f32::from(v)))
+        let f = |v: i16| T::from_single(f32::from(v));
+        [f(self[0]), f(self[1]), f(self[2])]
     }
+    const ALWAYS_FINITE: bool = true;
 }
 
 impl Sample for [i32; 3] {
     /// Exact up to `2^24` in `f32`; larger counts round to nearest.
     #[inline]
     fn xyz<T: Real>(&self) -> [T; 3] {
-        self.map(|v| T::lit(f64::from(v)))
+        let f = |v: i32| T::lit(f64::from(v));
+        [f(self[0]), f(self[1]), f(self[2])]
     }
+    /// `|v| < 2^31`, far inside the `f32` range.
+    const ALWAYS_FINITE: bool = true;
 }
 
 /// Finite components of a sample, or `None` when any is NaN or infinite.
-#[inline]
+#[inline(always)]
 pub(crate) fn finite<T: Real, S: Sample>(sample: &S) -> Option<[T; 3]> {
     let v = sample.xyz::<T>();
-    if v[0].is_finite() && v[1].is_finite() && v[2].is_finite() {
+    if S::ALWAYS_FINITE || (v[0].is_finite() && v[1].is_finite() && v[2].is_finite()) {
         Some(v)
     } else {
         None
@@ -118,5 +134,23 @@ impl<S: Sample, const N: usize> SampleStore<S, N> {
     /// Removes every sample.
     pub fn clear(&mut self) {
         self.samples.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The integer types' claim: every value converts to finite components.
+    #[test]
+    fn integer_samples_are_always_finite() {
+        for v in [i16::MIN, i16::MAX] {
+            assert!([v; 3].xyz::<f32>().iter().all(|c| c.is_finite()));
+        }
+        for v in [i32::MIN, i32::MAX] {
+            assert!([v; 3].xyz::<f32>().iter().all(|c| c.is_finite()));
+        }
+        const { assert!(<[i16; 3]>::ALWAYS_FINITE && <[i32; 3]>::ALWAYS_FINITE) };
+        const { assert!(!<[f32; 3]>::ALWAYS_FINITE && !<[f64; 3]>::ALWAYS_FINITE) };
     }
 }
