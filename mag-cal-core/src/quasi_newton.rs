@@ -13,8 +13,14 @@
 //!   `max|dx| <= step_tol * (1 + max|x|)` (the paper's criterion, `1e-6`);
 //! - or the gradient is below `grad_tol` (`max|g| <= grad_tol`);
 //! - the iteration cap `max_iter` turns into [`Error::NoConvergence`].
+//!
+//! The arithmetic is written as plain loops over fixed-size arrays (the
+//! components of an `SVector` are its `[T; N]` storage): the loop bounds
+//! are compile-time constants, so there are no bounds checks and no panic
+//! paths, and every update (the `N x N` inverse Hessian included) is done
+//! in place, without `N x N` temporaries on the stack.
 
-use nalgebra::{Cholesky, SMatrix, SVector};
+use nalgebra::SVector;
 
 use crate::{Error, Real};
 
@@ -69,6 +75,67 @@ const MAX_BACKTRACK: u32 = 60;
 /// Armijo sufficient-decrease constant.
 const ARMIJO: f64 = 1e-4;
 
+/// The components of a stack vector.
+#[inline(always)]
+fn arr<T: Real, const N: usize>(v: &SVector<T, N>) -> &[T; N] {
+    &v.data.0[0]
+}
+
+/// The components of a stack vector, mutable.
+#[inline(always)]
+fn arr_mut<T: Real, const N: usize>(v: &mut SVector<T, N>) -> &mut [T; N] {
+    &mut v.data.0[0]
+}
+
+/// `a^T b`, summed in index order.
+#[inline]
+fn dot<T: Real, const N: usize>(a: &[T; N], b: &[T; N]) -> T {
+    a.iter().zip(b).fold(T::zero(), |acc, (&p, &q)| acc + p * q)
+}
+
+/// `max |a_i|` (NaN components are skipped, as in nalgebra's `amax`).
+#[inline]
+fn amax<T: Real, const N: usize>(a: &[T; N]) -> T {
+    a.iter().fold(T::zero(), |m, &v| {
+        let v = v.abs();
+        if v > m {
+            v
+        } else {
+            m
+        }
+    })
+}
+
+/// `x + alpha d`.
+#[inline]
+fn along<T: Real, const N: usize>(x: &SVector<T, N>, d: &SVector<T, N>, alpha: T) -> SVector<T, N> {
+    let mut p = *x;
+    for (pi, &di) in arr_mut(&mut p).iter_mut().zip(arr(d)) {
+        *pi += di * alpha;
+    }
+    p
+}
+
+/// Sets `h` to the identity.
+fn set_identity<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
+    for (i, row) in h.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = if i == j { T::one() } else { T::zero() };
+        }
+    }
+}
+
+/// Copies the lower triangle of `h` onto the upper one.
+// Triangular loops: both indices are below `N`.
+#[allow(clippy::needless_range_loop)]
+fn mirror_lower<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
+    for i in 0..N {
+        for j in 0..i {
+            h[j][i] = h[i][j];
+        }
+    }
+}
+
 /// Minimises `f` from `x0` with BFGS.
 pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
     f: &F,
@@ -77,13 +144,20 @@ pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
 ) -> Result<Minimum<T, N>, Error> {
     let mut x = x0;
     let (mut cost, mut g) = f.cost_grad(&x);
-    let mut h_inv = SMatrix::<T, N, N>::identity();
+    // The inverse-Hessian approximation, row by row. It stays exactly
+    // symmetric: the start is, and each entry of the update below is
+    // computed by the same commutative expression as its mirror.
+    let mut h_inv = [[T::zero(); N]; N];
+    set_identity(&mut h_inv);
     let mut scaled = false;
+    // The search direction, then (scaled in place) the step taken.
+    let mut d = SVector::<T, N>::zeros();
     for iteration in 0..opts.max_iter {
-        if !cost.is_finite() || !g.iter().all(|v| v.is_finite()) {
+        let ga = arr(&g);
+        if !cost.is_finite() || !ga.iter().all(|v| v.is_finite()) {
             return Err(Error::SingularSystem);
         }
-        if g.amax() <= opts.grad_tol {
+        if amax(ga) <= opts.grad_tol {
             return Ok(Minimum {
                 x,
                 cost,
@@ -91,31 +165,35 @@ pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
                 stop: Stop::Gradient,
             });
         }
-        let mut d = -(h_inv * g);
-        let mut slope = g.dot(&d);
+        // d = -H g
+        for (di, row) in arr_mut(&mut d).iter_mut().zip(&h_inv) {
+            *di = -dot(row, ga);
+        }
+        let mut slope = dot(ga, arr(&d));
         if !(slope < T::zero()) {
             // Rounding destroyed positive definiteness: restart from steepest descent.
-            h_inv = SMatrix::identity();
+            set_identity(&mut h_inv);
             scaled = false;
-            d = -g;
-            slope = -g.norm_squared();
+            for (di, &gi) in arr_mut(&mut d).iter_mut().zip(ga) {
+                *di = -gi;
+            }
+            slope = -dot(ga, ga);
         }
         // Quadratic objectives: closed-form step, and the new cost from the
         // exact line model `f + alpha g^T d + alpha^2/2 d^T H d`, which
         // never cancels. Others: a backtracking search that hands back the
         // cost and gradient of the accepted point (one evaluation each).
-        let (step, cost_new, g_new) = match f.curvature(&d) {
+        let (alpha, cost_new, g_new) = match f.curvature(&d) {
             Some(c) => {
                 if !(c > T::zero()) {
                     return Err(Error::SingularSystem);
                 }
                 let alpha = -slope / c;
-                let step = d * alpha;
-                let (_, g_new) = f.cost_grad(&(x + step));
-                (step, cost + alpha * slope * T::lit(0.5), g_new)
+                let (_, g_new) = f.cost_grad(&along(&x, &d, alpha));
+                (alpha, cost + alpha * slope * T::lit(0.5), g_new)
             }
             None => match backtrack(f, &x, cost, slope, &d, scaled) {
-                Some((alpha, c, g_new)) => (d * alpha, c, g_new),
+                Some(accepted) => accepted,
                 // No decrease along a descent direction: the cost is flat to
                 // rounding, i.e. we are at the minimum.
                 None => {
@@ -128,26 +206,47 @@ pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
                 }
             },
         };
-        let x_new = x + step;
-        let y = g_new - g;
-        let sy = step.dot(&y);
+        // s = alpha d (in place), x <- x + s (the point just evaluated).
+        for (si, xi) in arr_mut(&mut d).iter_mut().zip(arr_mut(&mut x)) {
+            *si *= alpha;
+            *xi += *si;
+        }
+        let s = arr(&d);
+        let mut y = *arr(&g_new);
+        for (yi, &gi) in y.iter_mut().zip(arr(&g)) {
+            *yi -= gi;
+        }
+        let sy = dot(s, &y);
         if sy > T::zero() {
             if !scaled {
                 // Nocedal & Wright (6.20): scale the initial inverse Hessian.
-                h_inv *= sy / y.norm_squared();
+                let k = sy / dot(&y, &y);
+                for v in h_inv.iter_mut().flatten() {
+                    *v *= k;
+                }
                 scaled = true;
             }
             let rho = T::one() / sy;
-            let hy = h_inv * y;
-            let yhy = y.dot(&hy);
-            // H+ = H - rho (s (Hy)^T + (Hy) s^T) + (rho^2 y^T H y + rho) s s^T
-            h_inv += (step * hy.transpose() + hy * step.transpose()) * (-rho)
-                + step * step.transpose() * (rho * rho * yhy + rho);
+            let mut hy = [T::zero(); N];
+            for (hyi, row) in hy.iter_mut().zip(&h_inv) {
+                *hyi = dot(row, &y);
+            }
+            let yhy = dot(&y, &hy);
+            // H+ = H - rho (s (Hy)^T + (Hy) s^T) + (rho^2 y^T H y + rho) s s^T,
+            // entry by entry, in place.
+            let neg_rho = -rho;
+            let c = rho * rho * yhy + rho;
+            // The lower triangle, then its mirror (the update is symmetric).
+            for (i, ((row, &si), &hyi)) in h_inv.iter_mut().zip(s).zip(&hy).enumerate() {
+                for ((hij, &sj), &hyj) in row.iter_mut().zip(s).zip(&hy).take(i + 1) {
+                    *hij += (si * hyj + hyi * sj) * neg_rho + si * sj * c;
+                }
+            }
+            mirror_lower(&mut h_inv);
         }
-        x = x_new;
         cost = cost_new;
         g = g_new;
-        if step.amax() <= opts.step_tol * (T::one() + x.amax()) {
+        if amax(s) <= opts.step_tol * (T::one() + amax(arr(&x))) {
             return Ok(Minimum {
                 x,
                 cost,
@@ -177,10 +276,10 @@ fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
     let mut alpha = if scaled {
         T::one()
     } else {
-        T::one() / d.norm()
+        T::one() / dot(arr(d), arr(d)).sqrt()
     };
     for _ in 0..MAX_BACKTRACK {
-        let (c, g) = f.cost_grad(&(x + d * alpha));
+        let (c, g) = f.cost_grad(&along(x, d, alpha));
         if c.is_finite() && c <= cost + alpha * slope * T::lit(ARMIJO) {
             return Some((alpha, c, g));
         }
@@ -194,6 +293,48 @@ fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
         };
     }
     None
+}
+
+/// Solves `A z = b` for a symmetric positive definite `A` (its lower
+/// triangle is read) by an `L D L^T` factorisation (Cholesky without square
+/// roots). `None` when a pivot is not positive (or NaN): `A` is then not
+/// numerically positive definite.
+// Triangular loops: the indices are the algorithm; every one is below `M`.
+#[allow(clippy::needless_range_loop)]
+fn ldl_solve<T: Real, const M: usize>(mut a: [[T; M]; M], mut b: [T; M]) -> Option<[T; M]> {
+    let mut piv = [T::zero(); M];
+    for j in 0..M {
+        for k in 0..j {
+            let mut v = a[j][k];
+            for m in 0..k {
+                v -= a[j][m] * a[k][m] * piv[m];
+            }
+            a[j][k] = v / piv[k];
+        }
+        let mut p = a[j][j];
+        for k in 0..j {
+            p -= a[j][k] * a[j][k] * piv[k];
+        }
+        if !(p > T::zero()) {
+            return None;
+        }
+        piv[j] = p;
+    }
+    // L w = b, then D L^T z = w.
+    for i in 0..M {
+        for k in 0..i {
+            let v = a[i][k] * b[k];
+            b[i] -= v;
+        }
+    }
+    for i in (0..M).rev() {
+        b[i] /= piv[i];
+        for k in i + 1..M {
+            let v = a[k][i] * b[k];
+            b[i] -= v;
+        }
+    }
+    Some(b)
 }
 
 /// Anderson acceleration (type II) of a fixed-point iteration `x = g(x)` in
@@ -211,9 +352,12 @@ fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
 #[derive(Clone, Debug)]
 pub struct Anderson<T: Real, const D: usize, const M: usize> {
     mixing: T,
-    d_x: SMatrix<T, D, M>,
-    d_f: SMatrix<T, D, M>,
-    last: Option<(SVector<T, D>, SVector<T, D>)>,
+    /// Columns of `dX` (a ring buffer; unused columns are zero).
+    d_x: [[T; D]; M],
+    /// Columns of `dF`, likewise.
+    d_f: [[T; D]; M],
+    /// The previous iterate and its residual.
+    last: Option<([T; D], [T; D])>,
     len: usize,
     next: usize,
 }
@@ -235,8 +379,8 @@ impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
     pub fn with_mixing(mixing: T) -> Self {
         Self {
             mixing,
-            d_x: SMatrix::zeros(),
-            d_f: SMatrix::zeros(),
+            d_x: [[T::zero(); D]; M],
+            d_f: [[T::zero(); D]; M],
             last: None,
             len: 0,
             next: 0,
@@ -250,31 +394,69 @@ impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
 
     /// The next iterate from `x_k` and `g_k = g(x_k)`.
     pub fn step(&mut self, x: &SVector<T, D>, g: &SVector<T, D>) -> SVector<T, D> {
-        let f = g - x;
-        let plain = x + f * self.mixing;
-        if let Some((x_prev, f_prev)) = self.last.replace((*x, f)) {
-            if M > 0 {
-                let k = self.next % M;
-                self.d_x.set_column(k, &(x - x_prev));
-                self.d_f.set_column(k, &(f - f_prev));
-                self.next = (k + 1) % M;
+        let xa = arr(x);
+        let mut f = *arr(g);
+        let mut plain = *x;
+        for ((fi, pi), &xi) in f.iter_mut().zip(arr_mut(&mut plain)).zip(xa) {
+            *fi -= xi;
+            *pi = xi + *fi * self.mixing;
+        }
+        if let Some((x_prev, f_prev)) = self.last.replace((*xa, f)) {
+            // `None` when M = 0 (no history is kept).
+            if let Some(k) = self.next.checked_rem(M) {
+                if let (Some(cx), Some(cf)) = (self.d_x.get_mut(k), self.d_f.get_mut(k)) {
+                    for (c, (&a, &b)) in cx.iter_mut().zip(xa.iter().zip(&x_prev)) {
+                        *c = a - b;
+                    }
+                    for (c, (&a, &b)) in cf.iter_mut().zip(f.iter().zip(&f_prev)) {
+                        *c = a - b;
+                    }
+                }
+                self.next = if k + 1 < M { k + 1 } else { 0 };
                 self.len = (self.len + 1).min(M);
             }
         }
         if self.len == 0 {
             return plain;
         }
-        let mut normal = self.d_f.transpose() * self.d_f;
-        let ridge = normal.trace() * T::EPSILON * T::lit(64.0);
-        for i in 0..M {
-            // Unused columns are zero: a unit diagonal keeps their gamma 0.
-            normal[(i, i)] += if i < self.len { ridge } else { T::one() };
+        // Normal equations dF^T dF gamma = dF^T f.
+        let mut normal = [[T::zero(); M]; M];
+        let mut rhs = [T::zero(); M];
+        let mut trace = T::zero();
+        for (i, ((row, ci), ri)) in normal
+            .iter_mut()
+            .zip(&self.d_f)
+            .zip(rhs.iter_mut())
+            .enumerate()
+        {
+            for (j, (nij, cj)) in row.iter_mut().zip(&self.d_f).enumerate() {
+                *nij = dot(ci, cj);
+                if i == j {
+                    trace += *nij;
+                }
+            }
+            *ri = dot(ci, &f);
         }
-        let rhs = self.d_f.transpose() * f;
-        if let Some(c) = Cholesky::new(normal) {
-            let gamma = c.solve(&rhs);
-            let next = plain - (self.d_x + self.d_f * self.mixing) * gamma;
-            if next.iter().all(|v| v.is_finite()) {
+        let ridge = trace * T::EPSILON * T::lit(64.0);
+        for (i, row) in normal.iter_mut().enumerate() {
+            if let Some(v) = row.get_mut(i) {
+                // Unused columns are zero: a unit diagonal keeps their gamma 0.
+                *v += if i < self.len { ridge } else { T::one() };
+            }
+        }
+        if let Some(gamma) = ldl_solve(normal, rhs) {
+            // next = plain - (dX + beta dF) gamma, column by column.
+            let mut acc = [T::zero(); D];
+            for ((cx, cf), &gj) in self.d_x.iter().zip(&self.d_f).zip(&gamma) {
+                for ((a, &xi), &fi) in acc.iter_mut().zip(cx).zip(cf) {
+                    *a += (xi + fi * self.mixing) * gj;
+                }
+            }
+            let mut next = plain;
+            for (ni, &a) in arr_mut(&mut next).iter_mut().zip(&acc) {
+                *ni -= a;
+            }
+            if arr(&next).iter().all(|v| v.is_finite()) {
                 return next;
             }
         }
@@ -286,7 +468,7 @@ impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Vector2, Vector4};
+    use nalgebra::{SMatrix, Vector2, Vector4};
 
     struct Rosenbrock;
     impl Objective<f64, 2> for Rosenbrock {
@@ -362,6 +544,33 @@ mod tests {
         };
         let r = bfgs(&Rosenbrock, Vector2::new(-1.2, 1.0), &opts);
         assert_eq!(r.unwrap_err(), Error::NoConvergence { iterations: 3 });
+    }
+
+    #[test]
+    fn ldl_solve_matches_lu_and_rejects_indefinite() {
+        let l = SMatrix::<f64, 4, 4>::from_fn(|i, j| {
+            if j <= i {
+                1.0 + (i * 3 + j) as f64 * 0.1
+            } else {
+                0.0
+            }
+        });
+        let a = l * l.transpose();
+        let b = Vector4::new(1.0, -2.0, 0.5, 3.0);
+        let want = a.lu().solve(&b).unwrap();
+        let rows: [[f64; 4]; 4] = core::array::from_fn(|i| core::array::from_fn(|j| a[(i, j)]));
+        let z = ldl_solve(rows, [1.0, -2.0, 0.5, 3.0]).unwrap();
+        for (zi, wi) in z.iter().zip(want.iter()) {
+            assert!((zi - wi).abs() < 1e-12 * want.amax(), "{z:?} vs {want}");
+        }
+        let mut singular = rows;
+        singular[3] = singular[2];
+        for row in singular.iter_mut() {
+            row[3] = row[2];
+        }
+        assert!(ldl_solve(singular, [1.0; 4]).is_none());
+        assert!(ldl_solve([[1.0, 2.0], [2.0, 1.0]], [1.0; 2]).is_none());
+        assert!(ldl_solve([[f64::NAN]], [1.0]).is_none());
     }
 
     #[test]
