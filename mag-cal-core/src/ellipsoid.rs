@@ -80,6 +80,9 @@ pub fn fit_scatter<T: Real>(
 }
 
 /// `v = [v9, -1]` with `S9 v9 = sum phi9` (Cholesky).
+// Out of line: its arrays then occupy stack only during the call (see
+// docs/benchmarks.md, stack).
+#[inline(never)]
 fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);
     let mut s9 = [[T::zero(); 9]; 9];
@@ -101,6 +104,9 @@ fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 }
 
 /// `v` = eigenvector of the smallest eigenvalue of `S`.
+// Out of line: its arrays then occupy stack only during the call (see
+// docs/benchmarks.md, stack).
+#[inline(never)]
 fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let eig = sym_eigen(&to_array(s))?;
     Ok(SVector::from(eig.min_vector()))
@@ -118,6 +124,7 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// the solution by about that relative amount. (Always adding the ridge cost
 /// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
 #[allow(clippy::needless_range_loop)] // matrix notation, as in linalg
+#[inline(never)] // as ls9
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);
     let zero = T::zero();

@@ -101,17 +101,22 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
 /// nothing rotates ends the method. Non-finite entries give
 /// [`Error::SingularSystem`], a sweep cap hit [`Error::NoConvergence`].
 pub(crate) fn sym_eigen<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<SymEigen<T, N>, Error> {
-    let (a, vectors, scale) = jacobi::<T, N, true>(m)?;
-    let mut values = [T::zero(); N];
+    let mut eig = SymEigen {
+        values: [T::zero(); N],
+        vectors: [[T::zero(); N]; N],
+    };
+    let mut a = *m;
+    let scale = jacobi(&mut a, Some(&mut eig.vectors))?;
     for i in 0..N {
-        values[i] = a[i][i] * scale;
+        eig.values[i] = a[i][i] * scale;
     }
-    Ok(SymEigen { values, vectors })
+    Ok(eig)
 }
 
 /// The eigenvalues alone (cheaper: no vectors are accumulated).
 pub(crate) fn sym_eigenvalues<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<[T; N], Error> {
-    let (a, _, scale) = jacobi::<T, N, false>(m)?;
+    let mut a = *m;
+    let scale = jacobi(&mut a, None)?;
     let mut values = [T::zero(); N];
     for i in 0..N {
         values[i] = a[i][i] * scale;
@@ -130,16 +135,18 @@ pub(crate) fn min_max<T: Real, const N: usize>(values: &[T; N]) -> (T, T) {
     (lo, hi)
 }
 
-/// The Jacobi iteration: the (scaled) diagonalised matrix, the eigenvectors
-/// as rows when `VECTORS`, and the scale to multiply the diagonal by.
-fn jacobi<T: Real, const N: usize, const VECTORS: bool>(
-    m: &Mat<T, N>,
-) -> Result<(Mat<T, N>, Mat<T, N>, T), Error> {
+/// The Jacobi iteration, in place: `a` (symmetrised and divided by the
+/// returned scale) becomes diagonal, and `v`, when given, receives the
+/// eigenvectors as rows.
+fn jacobi<T: Real, const N: usize>(
+    a: &mut Mat<T, N>,
+    mut v: Option<&mut Mat<T, N>>,
+) -> Result<T, Error> {
     let zero = T::zero();
     let one = T::one();
     let half = T::lit(0.5);
     let mut scale = zero;
-    for row in m {
+    for row in a.iter() {
         for &x in row {
             if !x.is_finite() {
                 return Err(Error::SingularSystem);
@@ -147,21 +154,24 @@ fn jacobi<T: Real, const N: usize, const VECTORS: bool>(
             scale = scale.max(x.abs());
         }
     }
-    let mut v = [[zero; N]; N];
-    for (i, row) in v.iter_mut().enumerate() {
-        if let Some(d) = row.get_mut(i) {
-            *d = one;
+    if let Some(v) = v.as_deref_mut() {
+        for i in 0..N {
+            for j in 0..N {
+                v[i][j] = if i == j { one } else { zero };
+            }
         }
     }
     if scale == zero {
-        return Ok(([[zero; N]; N], v, zero));
+        return Ok(zero);
     }
     // Symmetrise while scaling (each half first: no overflow near max).
-    let mut a = [[zero; N]; N];
     for i in 0..N {
-        for j in 0..N {
-            a[i][j] = m[i][j] / scale * half + m[j][i] / scale * half;
+        for j in 0..i {
+            let x = a[i][j] / scale * half + a[j][i] / scale * half;
+            a[i][j] = x;
+            a[j][i] = x;
         }
+        a[i][i] /= scale;
     }
     let eps = T::EPSILON;
     // Beyond this |theta|, theta^2 + 1 rounds to theta^2.
@@ -209,7 +219,7 @@ fn jacobi<T: Real, const N: usize, const VECTORS: bool>(
                         a[q][r] = new_q;
                     }
                 }
-                if VECTORS {
+                if let Some(v) = v.as_deref_mut() {
                     for r in 0..N {
                         let (vp, vq) = (v[p][r], v[q][r]);
                         v[p][r] = c * vp - s * vq;
@@ -219,7 +229,7 @@ fn jacobi<T: Real, const N: usize, const VECTORS: bool>(
             }
         }
         if !rotated {
-            return Ok((a, v, scale));
+            return Ok(scale);
         }
     }
     Err(Error::NoConvergence {

@@ -116,6 +116,7 @@ pub(crate) fn flatness<T: Real>(m: &Moments<T>, count: usize) -> Result<T, Error
 /// to tridiagonal form (Householder, a direct method) and the two smallest
 /// eigenvalues are found by Sturm-sequence bisection to 1e-3 relative,
 /// which is all a ratio compared with 3 and 10 needs.
+#[inline(never)] // its 10x10 work arrays live only during the call
 pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Error> {
     if !scatter.iter().all(|v| v.is_finite()) {
         return Err(Error::OutOfRange);
