@@ -68,18 +68,31 @@ pub fn fit_scatter<T: Real>(
     s: &SMatrix<T, 10, 10>,
     variant: LsVariant,
 ) -> Result<Ellipsoid<T>, Error> {
+    fit_with(s, solver(variant))
+}
+
+/// A variant's solve: quadric coefficients from the scatter.
+pub type Solve<T> = fn(&SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error>;
+
+/// The solve of a variant (inlined, so that a constant variant links only
+/// its own solve).
+#[inline(always)]
+pub fn solver<T: Real>(variant: LsVariant) -> Solve<T> {
+    match variant {
+        LsVariant::Ls9 => ls9,
+        LsVariant::Svd10 => svd10,
+        LsVariant::LiGriffiths => li_griffiths,
+    }
+}
+
+/// Fits an ellipsoid to the scatter with a given solve.
+pub fn fit_with<T: Real>(s: &SMatrix<T, 10, 10>, solve: Solve<T>) -> Result<Ellipsoid<T>, Error> {
     if !s.iter().all(|v| v.is_finite()) {
         return Err(Error::OutOfRange);
     }
-    let v = match variant {
-        LsVariant::Ls9 => ls9(s)?,
-        LsVariant::Svd10 => svd10(s)?,
-        LsVariant::LiGriffiths => li_griffiths(s)?,
-    };
-    from_quadric(&v)
+    from_quadric(&solve(s)?)
 }
 
-/// `v = [v9, -1]` with `S9 v9 = sum phi9` (Cholesky).
 // Out of line: its arrays then occupy stack only during the call (see
 // docs/benchmarks.md, stack).
 #[inline(never)]

@@ -193,7 +193,33 @@ pub struct Fit<T: Real> {
 /// degenerate-geometry checks ([`quality`]) refuse planar, ambiguous,
 /// too eccentric or poorly covered data with a specific [`Error`], and
 /// report milder findings as [`Warning`]s.
+///
+/// # Flash
+/// The method and the LS variant are resolved to functions here, in a
+/// small wrapper inlined at the call site; the pipeline takes them as
+/// function pointers. With a constant [`Config`] (e.g. `Config::default()`)
+/// the optimiser sees which are used and links only those: LS9 + ADC2
+/// alone is what firmware pays for (`docs/benchmarks.md`). A `Config`
+/// chosen at run time links every method.
+#[inline(always)]
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
+    let step: methods::Step<T, S> = match config.method {
+        Method::Ls => methods::ls_only,
+        Method::Adc1 => methods::adc1::run,
+        Method::Adc2 => methods::adc2::run,
+        Method::Adc2Iterated => methods::iterated::run,
+        Method::SubMle => methods::submle::run,
+    };
+    pipeline(samples, config, ellipsoid::solver(config.ls), step)
+}
+
+/// [`calibrate`] with the LS solve and the method's step resolved.
+fn pipeline<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples)?;
     let norm = scan.norm;
     let mut warnings = Warnings::NONE;
@@ -222,14 +248,8 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
     // Judged after the fit, against its radial RMS (see REFUSE_QUADRIC_GAP).
     let quadric_gap = quality::quadric_gap(&scatter)?;
 
-    let ls = ellipsoid::fit_scatter(&scatter, config.ls)?;
-    let est = match config.method {
-        Method::Ls => methods::Estimate::from_ellipsoid(&ls),
-        Method::Adc1 => methods::adc1::run(samples, &norm, &ls, config)?,
-        Method::Adc2 => methods::adc2::run(samples, &norm, &ls, config)?,
-        Method::Adc2Iterated => methods::iterated::run(samples, &norm, &ls, config)?,
-        Method::SubMle => methods::submle::run(samples, &norm, &ls, config)?,
-    };
+    let ls = ellipsoid::fit_with(&scatter, ls_solve)?;
+    let est = step(samples, &norm, &ls, config)?;
     for w in est.warnings.iter() {
         warnings.insert(w);
     }

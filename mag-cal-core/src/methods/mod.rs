@@ -4,7 +4,9 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
-use crate::{Real, Warnings};
+use crate::normalize::Normalization;
+use crate::sample::Sample;
+use crate::{Config, Error, Real, Warnings};
 
 pub mod adc1;
 pub mod adc2;
@@ -61,6 +63,20 @@ impl Method {
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|m| m.name() == name)
     }
+}
+
+/// A method's work after the LS fit, as [`crate::calibrate`] calls it.
+pub type Step<T, S> =
+    fn(&[S], &Normalization<T>, &Ellipsoid<T>, &Config) -> Result<Estimate<T>, Error>;
+
+/// [`Method::Ls`]'s step: the LS fit itself.
+pub fn ls_only<T: Real, S: Sample>(
+    _samples: &[S],
+    _norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    _config: &Config,
+) -> Result<Estimate<T>, Error> {
+    Ok(Estimate::from_ellipsoid(ls))
 }
 
 /// What a method hands back, in normalised coordinates.
