@@ -56,7 +56,7 @@ impl<T: Real> Calibration<T> {
         if !(det > T::MIN_POSITIVE / T::EPSILON) || !det.is_finite() {
             return Err(Error::SingularSystem);
         }
-        let field_strength = T::one() / (scale * det.cbrt());
+        let field_strength = T::one() / (scale * det.positive_cbrt());
         if !field_strength.is_finite() || !hard_iron.iter().all(|v| v.is_finite()) {
             return Err(Error::OutOfRange);
         }

@@ -230,18 +230,19 @@ fn pipeline<T: Real, S: Sample>(
         warnings.insert(Warning::FewSamples);
     }
     if let Some(c) = config.noise_covariance {
-        let sigma = libm::sqrt((c[0][0] + c[1][1] + c[2][2]) / 3.0);
-        if norm.scale.to_f64() < quality::WARN_SPREAD_OVER_NOISE * sigma {
+        // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the f32 path.
+        let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
+        if norm.scale < T::lit(quality::WARN_SPREAD_OVER_NOISE) * var.sqrt() {
             warnings.insert(Warning::LowSpread);
         }
     }
 
     let moments = moments::Moments::accumulate(samples, &norm);
     let flatness = quality::flatness(&moments, scan.used)?;
-    if !(flatness.to_f64() >= quality::REFUSE_FLATNESS) {
+    if !(flatness >= T::lit(quality::REFUSE_FLATNESS)) {
         return Err(Error::Planar);
     }
-    if flatness.to_f64() < quality::WARN_FLATNESS {
+    if flatness < T::lit(quality::WARN_FLATNESS) {
         warnings.insert(Warning::NearlyPlanar);
     }
     let scatter = moments.scatter();
@@ -254,28 +255,28 @@ fn pipeline<T: Real, S: Sample>(
         warnings.insert(w);
     }
     let distortion = quality::distortion(&est.w)?;
-    if !(distortion.to_f64() <= quality::REFUSE_DISTORTION) {
+    if !(distortion <= T::lit(quality::REFUSE_DISTORTION)) {
         return Err(Error::ExtremeDistortion);
     }
     let calibration = Calibration::from_normalised_w(&norm, &est.w, &est.centre)?;
     let last = quality::final_pass(samples, &norm, &est.centre, &est.w)?;
-    if !(quadric_gap.to_f64() >= quality::REFUSE_QUADRIC_GAP)
-        && !(last.radial_rms.to_f64() >= quality::GAP_NOISE_LIMIT)
+    if !(quadric_gap >= T::lit(quality::REFUSE_QUADRIC_GAP))
+        && !(last.radial_rms >= T::lit(quality::GAP_NOISE_LIMIT))
     {
         return Err(Error::AmbiguousQuadric);
     }
-    if !(quadric_gap.to_f64() >= quality::WARN_QUADRIC_GAP) {
+    if !(quadric_gap >= T::lit(quality::WARN_QUADRIC_GAP)) {
         warnings.insert(Warning::WeakQuadric);
     }
-    if !(last.coverage.to_f64() >= quality::REFUSE_COVERAGE) {
+    if !(last.coverage >= T::lit(quality::REFUSE_COVERAGE)) {
         return Err(Error::PoorCoverage);
     }
-    if !(last.gram_condition.to_f64() <= quality::WARN_GRAM_CONDITION) {
+    if !(last.gram_condition <= T::lit(quality::WARN_GRAM_CONDITION)) {
         warnings.insert(Warning::WeakCoverage);
     }
     if let Some(expected) = config.expected_field_strength {
-        let deviation = calibration.field_strength().to_f64() / expected - 1.0;
-        if !(libm::fabs(deviation) <= quality::REFUSE_FIELD_DEVIATION) {
+        let deviation = calibration.field_strength() / T::lit(expected) - T::one();
+        if !(deviation.abs() <= T::lit(quality::REFUSE_FIELD_DEVIATION)) {
             return Err(Error::FieldStrengthMismatch);
         }
     }

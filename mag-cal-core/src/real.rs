@@ -33,6 +33,14 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     /// `1 / libm::sqrt(x)`. The result for zero, negative, subnormal or
     /// non-finite `x` is unspecified (but never a panic): callers check.
     fn rsqrt(self) -> Self;
+    /// The cube root of a positive normal `x`, to the type's precision.
+    ///
+    /// `f32`: a bit-level initial guess refined by Newton steps in `f32`
+    /// (libm's `cbrtf` computes in `f64`, which on a Cortex-M4F pulls in
+    /// about 3 KB of soft-float routines). `f64`: `libm::cbrt`. The result
+    /// for zero, negative, subnormal or non-finite `x` is unspecified (but
+    /// never a panic): callers check.
+    fn positive_cbrt(self) -> Self;
 }
 
 impl Real for f32 {
@@ -65,6 +73,16 @@ impl Real for f32 {
         y *= 1.5 - half * y * y;
         y
     }
+    #[inline]
+    fn positive_cbrt(self) -> Self {
+        // Exponent divided by 3 in the bits (relative error below 4 %),
+        // then Newton on y^3 = x: 4e-2 -> 2e-3 -> 4e-6 -> rounding.
+        let mut y = f32::from_bits(0x2a51_4067_u32.wrapping_add(self.to_bits() / 3));
+        for _ in 0..4 {
+            y -= (y - self / (y * y)) * (1.0 / 3.0);
+        }
+        y
+    }
 }
 
 impl Real for f64 {
@@ -90,6 +108,10 @@ impl Real for f64 {
     fn rsqrt(self) -> Self {
         1.0 / libm::sqrt(self)
     }
+    #[inline]
+    fn positive_cbrt(self) -> Self {
+        libm::cbrt(self)
+    }
 }
 
 #[cfg(test)]
@@ -107,5 +129,20 @@ mod tests {
             x *= 1.37;
         }
         assert!(worst < 3e-7, "{worst}");
+    }
+
+    #[test]
+    fn positive_cbrt_f32_is_accurate_over_the_normal_range() {
+        let mut worst = 0.0f64;
+        let mut x = f32::MIN_POSITIVE;
+        while x < f32::MAX / 1.37 {
+            let got = f64::from(x.positive_cbrt());
+            let want = f64::from(x).cbrt();
+            worst = worst.max((got / want - 1.0).abs());
+            x *= 1.37;
+        }
+        assert!(worst < 2.5e-7, "{worst}");
+        assert_eq!(8.0f32.positive_cbrt(), 2.0);
+        assert_eq!(8.0f64.positive_cbrt(), 2.0);
     }
 }
