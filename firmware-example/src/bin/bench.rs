@@ -51,10 +51,9 @@
 //!   which includes a 3x3 symmetric eigen decomposition), `adc2-stats` (the
 //!   artificial-data pass), `adc2-solve` (BFGS on the statistics),
 //!   `adc2-run` (`adc2-stats` + `adc2-solve` + the canonical square root),
-//!   and proxies for private pieces: `eigen10` (nalgebra's symmetric eigen
-//!   decomposition of the 10x10 scatter, as the quadric-gap check does),
-//!   `eigen3` (one 3x3 symmetric eigen decomposition; the checks and the
-//!   canonical forms do several), `rsqrt` (1000 calls of the core's
+//!   and proxies for private pieces: `calibration-new` (`Calibration::new`:
+//!   one 3x3 symmetric eigen decomposition, as the checks and the canonical
+//!   forms do several, plus a determinant and a cube root), `rsqrt` (1000 calls of the core's
 //!   `Real::rsqrt` for `f32`, the inverse square root of the per-sample
 //!   passes) and `sqrtf` (1000 calls of `libm::sqrtf`, the software square
 //!   root behind `f32` `sqrt` in `no_std`). `adc2-other` is `adc2` minus
@@ -80,9 +79,9 @@ use mag_cal_core::artificial::Stats;
 use mag_cal_core::ellipsoid;
 use mag_cal_core::methods::adc2;
 use mag_cal_core::moments::Moments;
-use mag_cal_core::nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::normalize::Normalization;
-use mag_cal_core::{calibrate, Config, LsVariant, Method, Real};
+use mag_cal_core::{calibrate, Calibration, Config, LsVariant, Method, Real};
 
 /// The sample count of the headline figures.
 const N: usize = 1000;
@@ -356,15 +355,14 @@ fn main() -> ! {
         report("adc2-other", N, total.saturating_sub(stages));
     }
 
-    // Proxies for private pieces: the symmetric eigen decompositions of the
-    // checks, and the inverse square root of the per-sample passes (and
-    // libm's software square root, for comparison).
-    stage(&timer, "eigen10", SMALL_REPEATS, || {
-        SymmetricEigen::try_new(black_box(scatter), f32::EPSILON, 500)
-    });
-    let cov = Matrix3::from_fn(|i, j| scatter[(i, j)] + if i == j { 1.0 } else { 0.0 });
-    stage(&timer, "eigen3", SMALL_REPEATS, || {
-        SymmetricEigen::try_new(black_box(cov), f32::EPSILON, 500)
+    // Proxies for private pieces: `Calibration::new` is one 3x3 symmetric
+    // eigen decomposition (the core's own Jacobi, as in the checks and the
+    // canonical forms) plus a determinant and a cube root; then the inverse
+    // square root of the per-sample passes (and libm's software square
+    // root, for comparison).
+    let spd = Matrix3::from_fn(|i, j| scatter[(i, j)] + if i == j { 1.0 } else { 0.0 });
+    stage(&timer, "calibration-new", SMALL_REPEATS, || {
+        Calibration::new(Vector3::zeros(), black_box(spd))
     });
     stage(&timer, "rsqrt", 1, || {
         let mut acc = 0.0f32;
