@@ -20,6 +20,16 @@
 //! The ADC2 cost at the start is `J0 = tr S_rr`; ADC1 weights the same
 //! quantities. (The design document's `s_d`, `S_dh` are `s_r + T0 s_h` and
 //! `S_rh + T0 S_hh`.)
+//!
+//! The pass itself needs neither `d` nor `T0`: with the radial error
+//! `e_i = |u_i| - 1`, `r_i = T0 (u_i - h_i) = e_i T0 h_i`, so
+//!
+//! ```text
+//! s_r = T0 sum e_i h_i,   S_rh = T0 sum e_i h_i h_i^T,   S_rr = T0 (sum e_i^2 h_i h_i^T) T0^T
+//! ```
+//!
+//! and the samples feed 24 sums (`h`, `e h` and three symmetric matrices)
+//! instead of 27, each still a sum of small terms.
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
@@ -74,88 +84,289 @@ impl<T: Real> Stats<T> {
     }
 
     /// One pass over the samples with the start `(centre, w)` = (`b0`, `W0`)
-    /// in the coordinates of `norm`.
+    /// in the coordinates of `norm`; `T0 = W0^-1`.
     ///
-    /// The loop is written on scalars (27 accumulators, one inverse square
-    /// root, about 90 flops a sample): generic small-matrix operations in a
-    /// per-sample loop cost about ten times as much on a Cortex-M4F.
+    /// [`Error::NotAnEllipsoid`] when `W0` is singular to working precision,
+    /// [`Error::TooFewSamples`] when fewer than [`crate::MIN_SAMPLES`]
+    /// samples have a direction.
     pub fn accumulate<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         centre: &Vector3<T>,
         w: &Matrix3<T>,
     ) -> Result<Self, Error> {
-        let one = T::one();
-        let map = Projector::new(norm, centre, w);
-        let mut total = [T::zero(); 27];
-        let mut count = 0usize;
-        for block in samples.chunks(BLOCK) {
-            let mut a = [T::zero(); 27];
-            for sample in block {
-                let Some([y0, y1, y2]) = finite::<T, S>(sample) else {
-                    continue;
-                };
-                let ([dx, dy, dz], [ux, uy, uz]) = map.project([y0, y1, y2]);
-                let q = ux * ux + uy * uy + uz * uz;
-                if !(q >= T::MIN_POSITIVE) {
-                    // At the fitted centre the direction is undefined.
-                    continue;
-                }
-                let inv = q.rsqrt();
-                let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
-                // r = d - T0 h = d (1 - 1/|u|)
-                let k = one - inv;
-                let (rx, ry, rz) = (dx * k, dy * k, dz * k);
-                a[0] += hx;
-                a[1] += hy;
-                a[2] += hz;
-                a[3] += hx * hx;
-                a[4] += hx * hy;
-                a[5] += hx * hz;
-                a[6] += hy * hy;
-                a[7] += hy * hz;
-                a[8] += hz * hz;
-                a[9] += rx;
-                a[10] += ry;
-                a[11] += rz;
-                a[12] += rx * hx;
-                a[13] += rx * hy;
-                a[14] += rx * hz;
-                a[15] += ry * hx;
-                a[16] += ry * hy;
-                a[17] += ry * hz;
-                a[18] += rz * hx;
-                a[19] += rz * hy;
-                a[20] += rz * hz;
-                a[21] += rx * rx;
-                a[22] += rx * ry;
-                a[23] += rx * rz;
-                a[24] += ry * ry;
-                a[25] += ry * rz;
-                a[26] += rz * rz;
-                count += 1;
-            }
-            for (t, v) in total.iter_mut().zip(a) {
-                *t += v;
-            }
-        }
+        let (count, total) = sums(samples, &Projector::new(norm, centre, w));
         if count < crate::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
                 required: crate::normalize::MIN_SAMPLES,
             });
         }
-        let t = total;
+        Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)
+    }
+
+    /// The statistics from the sums of the pass, or `None` when `W0` is
+    /// singular. Not inlined: its temporaries then stay out of the stack
+    /// frame that is live during the pass.
+    #[inline(never)]
+    fn from_sums(count: usize, t: &[T; SUMS], w: &Matrix3<T>) -> Option<Self> {
+        let t0 = inverse(w)?;
         let sym = |a: T, b: T, c: T, d: T, e: T, f: T| Matrix3::new(a, b, c, b, d, e, c, e, f);
-        Ok(Self {
+        let s_eh = Vector3::new(t[3], t[4], t[5]);
+        let s_ehh = sym(t[12], t[13], t[14], t[15], t[16], t[17]);
+        let s_eehh = sym(t[18], t[19], t[20], t[21], t[22], t[23]);
+        let s_rr = t0 * s_eehh * t0.transpose();
+        Some(Self {
             count,
             s_h: Vector3::new(t[0], t[1], t[2]),
-            s_hh: sym(t[3], t[4], t[5], t[6], t[7], t[8]),
-            s_r: Vector3::new(t[9], t[10], t[11]),
-            s_rh: Matrix3::new(
-                t[12], t[13], t[14], t[15], t[16], t[17], t[18], t[19], t[20],
-            ),
-            s_rr: sym(t[21], t[22], t[23], t[24], t[25], t[26]),
+            s_hh: sym(t[6], t[7], t[8], t[9], t[10], t[11]),
+            s_r: t0 * s_eh,
+            s_rh: t0 * s_ehh,
+            // Symmetric to the last bit, as a sum of `r r^T` is.
+            s_rr: (s_rr + s_rr.transpose()) * T::lit(0.5),
         })
+    }
+}
+
+/// Number of per-sample sums: `h` (3), `e h` (3), then the upper triangles
+/// of `h h^T`, `e h h^T` and `e^2 h h^T` (6 each).
+const SUMS: usize = 24;
+
+/// The count of the samples with a direction and their [`SUMS`] sums, in
+/// blocks of [`BLOCK`] samples. Not inlined: the buffer of directions is
+/// then the only large item of its stack frame.
+#[inline(never)]
+fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>) -> (usize, [T; SUMS]) {
+    let mut total = [T::zero(); SUMS];
+    let mut count = 0usize;
+    let mut buf = [[T::zero(); 4]; CHUNK];
+    for block in samples.chunks(BLOCK) {
+        let mut a = [T::zero(); SUMS];
+        for chunk in block.chunks(CHUNK) {
+            count += directions(chunk, map, &mut buf);
+            add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
+        }
+        for (t, v) in total.iter_mut().zip(a) {
+            *t += v;
+        }
+    }
+    (count, total)
+}
+
+/// Samples whose directions are buffered between the two loops of the
+/// pass.
+///
+/// The pass is two loops over each chunk, each a function of its own (not
+/// inlined): [`directions`] maps the samples to `[h, e]` and
+/// [`add_directions`] adds the 24 sums. In one loop, the 24 sums, the map's
+/// 12 constants and the temporaries do not fit the Cortex-M4F's 32
+/// floating-point registers, and spills and register shuffles made the pass
+/// 153 instructions a sample (`f32`, `[i16; 3]`, opt-level "s"); split, each
+/// loop fits, and the pass takes 100 (about 56 + 34, and the chunk
+/// overhead). The buffer is 16 bytes a sample in `f32` (512 bytes of
+/// stack); 64 samples would save 1.5 instructions a sample for 512 bytes
+/// more.
+const CHUNK: usize = 32;
+
+/// `[h, e h]` of each sample of `chunk` into `out` (zeros for a sample
+/// without a direction: non-finite, or at the fitted centre), and the count
+/// of the samples with a direction.
+#[inline(never)]
+fn directions<T: Real, S: Sample>(
+    chunk: &[S],
+    map: &Projector<T>,
+    out: &mut [[T; 4]; CHUNK],
+) -> usize {
+    let mut count = 0;
+    for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
+        *slot = match direction(sample, map) {
+            Some(v) => {
+                count += 1;
+                v
+            }
+            None => [T::zero(); 4],
+        };
+    }
+    count
+}
+
+/// `[h, e h]` of one sample, with `e = |u| - 1`; `None` when the sample is
+/// not finite or lies at the fitted centre (no direction).
+#[inline(always)]
+fn direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option<[T; 4]> {
+    let [ux, uy, uz] = map.project(finite::<T, S>(sample)?);
+    let q = ux * ux + uy * uy + uz * uz;
+    if !(q >= T::MIN_POSITIVE) {
+        return None;
+    }
+    let inv = q.rsqrt();
+    let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
+    let e = q * inv - T::one();
+    Some([hx, hy, hz, e])
+}
+
+/// Adds the sums of `[h, g = e h]` over `dirs` to `a`.
+#[inline(never)]
+fn add_directions<T: Real>(a: &mut [T; SUMS], dirs: &[[T; 4]]) {
+    let mut s = *a;
+    for &[hx, hy, hz, e] in dirs {
+        let (gx, gy, gz) = (hx * e, hy * e, hz * e);
+        s[0] += hx;
+        s[1] += hy;
+        s[2] += hz;
+        s[3] += gx;
+        s[4] += gy;
+        s[5] += gz;
+        s[6] += hx * hx;
+        s[7] += hx * hy;
+        s[8] += hx * hz;
+        s[9] += hy * hy;
+        s[10] += hy * hz;
+        s[11] += hz * hz;
+        s[12] += gx * hx;
+        s[13] += gx * hy;
+        s[14] += gx * hz;
+        s[15] += gy * hy;
+        s[16] += gy * hz;
+        s[17] += gz * hz;
+        s[18] += gx * gx;
+        s[19] += gx * gy;
+        s[20] += gx * gz;
+        s[21] += gy * gy;
+        s[22] += gy * gz;
+        s[23] += gz * gz;
+    }
+    *a = s;
+}
+
+/// The inverse of a 3x3 matrix (adjugate over determinant), or `None` when
+/// it is singular to working precision or the result is not finite.
+fn inverse<T: Real>(m: &Matrix3<T>) -> Option<Matrix3<T>> {
+    // Columns of the storage: `a[column][row]`.
+    let [[a00, a10, a20], [a01, a11, a21], [a02, a12, a22]] = m.data.0;
+    // Cofactors of the first row, then the rest.
+    let c00 = a11 * a22 - a12 * a21;
+    let c01 = a12 * a20 - a10 * a22;
+    let c02 = a10 * a21 - a11 * a20;
+    let det = a00 * c00 + a01 * c01 + a02 * c02;
+    let size = m.amax();
+    if !(det.abs() > size * size * size * T::EPSILON) {
+        return None;
+    }
+    let c10 = a02 * a21 - a01 * a22;
+    let c11 = a00 * a22 - a02 * a20;
+    let c12 = a01 * a20 - a00 * a21;
+    let c20 = a01 * a12 - a02 * a11;
+    let c21 = a02 * a10 - a00 * a12;
+    let c22 = a00 * a11 - a01 * a10;
+    // inverse = adj / det, adj = cofactors transposed.
+    let inv = Matrix3::new(c00, c10, c20, c01, c11, c21, c02, c12, c22) / det;
+    inv.iter().all(|v| v.is_finite()).then_some(inv)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::Rng;
+
+    /// The statistics by their definition, sample by sample:
+    /// `d = x - b0`, `u = W0 d`, `h = u/|u|`, `r = d - T0 h`.
+    fn by_definition(
+        samples: &[[f64; 3]],
+        norm: &Normalization<f64>,
+        b0: &Vector3<f64>,
+        w0: &Matrix3<f64>,
+    ) -> Stats<f64> {
+        let t0 = w0.try_inverse().unwrap();
+        let mut s = Stats {
+            count: 0,
+            s_h: Vector3::zeros(),
+            s_hh: Matrix3::zeros(),
+            s_r: Vector3::zeros(),
+            s_rh: Matrix3::zeros(),
+            s_rr: Matrix3::zeros(),
+        };
+        for y in samples {
+            if !y.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            let d = norm.forward(*y) - b0;
+            let u = w0 * d;
+            if u.norm() == 0.0 {
+                continue;
+            }
+            let h = u / u.norm();
+            let r = d - t0 * h;
+            s.count += 1;
+            s.s_h += h;
+            s.s_hh += h * h.transpose();
+            s.s_r += r;
+            s.s_rh += r * h.transpose();
+            s.s_rr += r * r.transpose();
+        }
+        s
+    }
+
+    /// The pass's sums of `h`, `e h` and `e^k h h^T`, mapped through `T0`,
+    /// are the statistics of the definition; a non-finite sample and one at
+    /// the fitted centre are skipped.
+    #[test]
+    fn the_pass_matches_the_definition() {
+        let mut rng = Rng(7);
+        let norm = Normalization {
+            centre: Vector3::new(120.0, -40.0, 15.0),
+            scale: 50.0,
+            inv_scale: 1.0 / 50.0,
+        };
+        let b0 = Vector3::new(0.05, -0.02, 0.1);
+        let w0 = Matrix3::new(1.1, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.2);
+        let t0 = w0.try_inverse().unwrap();
+        let mut samples = [[0.0f64; 3]; 300];
+        for s in samples.iter_mut() {
+            let x = b0 + t0 * (rng.direction() * rng.range(0.9, 1.1));
+            let y = norm.point_back(&x);
+            *s = [y.x, y.y, y.z];
+        }
+        samples[5] = [f64::NAN, 1.0, 2.0];
+        let centre = norm.point_back(&b0);
+        samples[9] = [centre.x, centre.y, centre.z];
+        let got = Stats::accumulate(&samples, &norm, &b0, &w0).unwrap();
+        let want = by_definition(&samples, &norm, &b0, &w0);
+        assert_eq!(got.count, 298);
+        assert_eq!(want.count, 298);
+        let close = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .all(|(x, y)| (x - y).abs() <= 1e-9 * (1.0 + y.abs()))
+        };
+        assert!(close(got.s_h.as_slice(), want.s_h.as_slice()));
+        assert!(close(got.s_hh.as_slice(), want.s_hh.as_slice()));
+        assert!(close(got.s_r.as_slice(), want.s_r.as_slice()));
+        assert!(close(got.s_rh.as_slice(), want.s_rh.as_slice()));
+        assert!(close(got.s_rr.as_slice(), want.s_rr.as_slice()));
+        assert_eq!(got.s_rr, got.s_rr.transpose());
+    }
+
+    #[test]
+    fn a_singular_start_is_refused() {
+        let norm = Normalization {
+            centre: Vector3::zeros(),
+            scale: 1.0,
+            inv_scale: 1.0,
+        };
+        let mut samples = [[1.0f64, 1.0, -2.0]; 20];
+        for (i, s) in samples.iter_mut().enumerate() {
+            s[0] = i as f64;
+        }
+        let w0 = Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
+        let r = Stats::accumulate(&samples, &norm, &Vector3::zeros(), &w0);
+        assert_eq!(r.unwrap_err(), Error::NotAnEllipsoid);
+    }
+
+    #[test]
+    fn inverse_of_a_general_matrix() {
+        let m = Matrix3::new(2.0, -1.0, 0.5, 0.3, 1.5, -0.7, 0.1, 0.4, 3.0);
+        let inv = inverse(&m).unwrap();
+        assert!((m * inv - Matrix3::identity()).amax() < 1e-14);
     }
 }

@@ -209,38 +209,11 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
 ) -> Result<FinalPass<T>, Error> {
     let one = T::one();
     let map = Projector::new(norm, centre, w);
-    // Scalar accumulators: squared radial error, sum h, sum h h^T (upper).
-    let mut total = [T::zero(); 10];
+    let mut total = [T::zero(); FINAL_SUMS];
     let mut count = 0usize;
     for block in samples.chunks(BLOCK) {
-        let mut a = [T::zero(); 10];
-        for sample in block {
-            let Some([y0, y1, y2]) = finite::<T, S>(sample) else {
-                continue;
-            };
-            let (_, [ux, uy, uz]) = map.project([y0, y1, y2]);
-            let q = ux * ux + uy * uy + uz * uz;
-            count += 1;
-            if !(q >= T::MIN_POSITIVE) {
-                // At the centre: |u| - 1 = -1, no direction.
-                a[0] += one;
-                continue;
-            }
-            let inv = q.rsqrt();
-            // |u| - 1 = (|u|^2 - 1) / (|u| + 1): no extra cancellation.
-            let e = (q - one) / (q * inv + one);
-            a[0] += e * e;
-            let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
-            a[1] += hx;
-            a[2] += hy;
-            a[3] += hz;
-            a[4] += hx * hx;
-            a[5] += hx * hy;
-            a[6] += hx * hz;
-            a[7] += hy * hy;
-            a[8] += hy * hz;
-            a[9] += hz * hz;
-        }
+        let (n, a) = final_block(block, &map);
+        count += n;
         for (t, v) in total.iter_mut().zip(a) {
             *t += v;
         }
@@ -278,6 +251,44 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
         coverage,
         gram_condition,
     })
+}
+
+/// Sums of the final pass: squared radial error, `h`, upper `h h^T`.
+const FINAL_SUMS: usize = 10;
+
+/// The finite samples of `block` and their [`FINAL_SUMS`] sums, on
+/// scalars, in a loop of its own (not inlined: the floating-point registers
+/// are then the loop's alone).
+#[inline(never)]
+fn final_block<T: Real, S: Sample>(block: &[S], map: &Projector<T>) -> (usize, [T; FINAL_SUMS]) {
+    let one = T::one();
+    let mut a = [T::zero(); FINAL_SUMS];
+    let mut count = 0;
+    for y in block.iter().filter_map(finite::<T, S>) {
+        let [ux, uy, uz] = map.project(y);
+        let q = ux * ux + uy * uy + uz * uz;
+        count += 1;
+        if !(q >= T::MIN_POSITIVE) {
+            // At the centre: |u| - 1 = -1, no direction.
+            a[0] += one;
+            continue;
+        }
+        let inv = q.rsqrt();
+        // |u| - 1 = (|u|^2 - 1) / (|u| + 1): no extra cancellation.
+        let e = (q - one) / (q * inv + one);
+        a[0] += e * e;
+        let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
+        a[1] += hx;
+        a[2] += hy;
+        a[3] += hz;
+        a[4] += hx * hx;
+        a[5] += hx * hy;
+        a[6] += hx * hz;
+        a[7] += hy * hy;
+        a[8] += hy * hz;
+        a[9] += hz * hz;
+    }
+    (count, a)
 }
 
 /// One thing a caller should know about a calibration that was not refused.
