@@ -259,7 +259,7 @@ fn pipeline<T: Real, S: Sample>(
         return Err(Error::ExtremeDistortion);
     }
     let calibration = Calibration::from_normalised_w(&norm, &est.w, &est.centre)?;
-    let last = quality::final_pass(samples, &norm, &est.centre, &est.w)?;
+    let last = quality::final_pass(samples, &norm, &est.centre, &est.w, est.directions)?;
     if !(quadric_gap >= T::lit(quality::REFUSE_QUADRIC_GAP))
         && !(last.radial_rms >= T::lit(quality::GAP_NOISE_LIMIT))
     {

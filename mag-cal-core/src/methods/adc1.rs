@@ -29,6 +29,7 @@ use crate::linalg::{
 use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
+use crate::quality::DirectionSums;
 use crate::quasi_newton::{bfgs, Objective};
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
@@ -129,5 +130,6 @@ pub fn run<T: Real, S: Sample>(
         iterations: m.iterations,
         passes: 1,
         warnings: Warnings::NONE,
+        directions: Some(DirectionSums::from(&stats)),
     })
 }

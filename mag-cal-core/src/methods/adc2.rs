@@ -23,6 +23,7 @@ use crate::ellipsoid::Ellipsoid;
 use crate::linalg::{cholesky, cholesky_solve, min_max, sym_eigenvalues, sym_inv_sqrt, to_array};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
+use crate::quality::DirectionSums;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
@@ -188,6 +189,7 @@ pub fn run<T: Real, S: Sample>(
         iterations: sol.iterations,
         passes: 1,
         warnings: Warnings::NONE,
+        directions: Some(DirectionSums::from(&stats)),
     })
 }
 

@@ -127,6 +127,7 @@ pub fn run<T: Real, S: Sample>(
                 iterations: 0,
                 passes,
                 warnings: Warnings::NONE,
+                directions: None,
             });
         }
         let next = accel.step(&x, &g);
@@ -148,6 +149,7 @@ pub fn run<T: Real, S: Sample>(
         iterations: 0,
         passes,
         warnings,
+        directions: None,
     })
 }
 

@@ -5,6 +5,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
 use crate::normalize::Normalization;
+use crate::quality::DirectionSums;
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
 
@@ -92,6 +93,12 @@ pub struct Estimate<T: Real> {
     pub passes: u32,
     /// Warnings raised.
     pub warnings: Warnings,
+    /// The direction sums of the method's artificial-data pass, when it
+    /// made one at the LS fit (ADC1, ADC2): the coverage figures are then
+    /// computed from them, and the final pass sums the radial error alone.
+    /// They differ from the final calibration's directions by at most 2 %
+    /// on the design document's scenarios (0.05 % in A).
+    pub directions: Option<DirectionSums<T>>,
 }
 
 impl<T: Real> Estimate<T> {
@@ -103,6 +110,7 @@ impl<T: Real> Estimate<T> {
             iterations: 0,
             passes: 0,
             warnings: Warnings::NONE,
+            directions: None,
         }
     }
 }

@@ -133,6 +133,7 @@ pub fn run<T: Real, S: Sample>(
         iterations: min.iterations,
         passes: counter.count(),
         warnings: Warnings::NONE,
+        directions: None,
     })
 }
 
