@@ -30,9 +30,10 @@ pub struct Quality<T: Real> {
     /// `h = W (y - b) / |W (y - b)|`: 1/3 for a full sphere, 0.085 for a
     /// +-30 deg band, 0.02 for +-10 deg.
     ///
-    /// For [`crate::Method::Adc2`] the directions are those of its
-    /// artificial data, i.e. of the LS fit it starts from (the statistics
-    /// it has already summed, so the last pass need not sum them again);
+    /// For [`crate::Method::Adc2`] and [`crate::Method::Adc1`] the
+    /// directions are those of their artificial data, i.e. of the LS fit
+    /// they start from (the statistics
+    /// already summed, so the last pass need not sum them again);
     /// for the other methods, those of the final calibration. On the
     /// design document's scenarios A-G the two differ by at most 2 % (0.05 %
     /// to 0.6 % except the noisiest, E).
