@@ -245,11 +245,7 @@ fn pipeline<T: Real, S: Sample>(
     if flatness < T::lit(quality::WARN_FLATNESS) {
         warnings.insert(Warning::NearlyPlanar);
     }
-    let scatter = moments.scatter();
-    // Judged after the fit, against its radial RMS (see REFUSE_QUADRIC_GAP).
-    let quadric_gap = quality::quadric_gap(&scatter)?;
-
-    let ls = ellipsoid::fit_with(&scatter, ls_solve)?;
+    let (ls, quadric_gap) = ls_step(&moments, ls_solve)?;
     let est = step(samples, &norm, &ls, config)?;
     for w in est.warnings.iter() {
         warnings.insert(w);
@@ -300,4 +296,18 @@ fn pipeline<T: Real, S: Sample>(
             warnings,
         },
     })
+}
+
+/// Step 1 on the moments: the LS fit, and the quadric gap of the same
+/// scatter (judged after the method, against its radial RMS; see
+/// [`quality::REFUSE_QUADRIC_GAP`]). Out of line, so the 10x10 scatter
+/// takes stack only while it is used.
+#[inline(never)]
+fn ls_step<T: Real>(
+    moments: &moments::Moments<T>,
+    solve: ellipsoid::Solve<T>,
+) -> Result<(ellipsoid::Ellipsoid<T>, T), Error> {
+    let scatter = moments.scatter();
+    let quadric_gap = quality::quadric_gap(&scatter)?;
+    Ok((ellipsoid::fit_with(&scatter, solve)?, quadric_gap))
 }

@@ -30,7 +30,7 @@ use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
 use crate::methods::Estimate;
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
-use crate::quasi_newton::{bfgs, Objective};
+use crate::quasi_newton::{bfgs, Minimum, Objective};
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
 
@@ -101,16 +101,15 @@ fn weight<T: Real>(
     Ok(inv / top)
 }
 
-/// ADC1 from the LS fit: artificial data (one pass), the noise weight, the
-/// weighted solve, then the canonical `W'`.
-pub fn run<T: Real, S: Sample>(
-    samples: &[S],
+/// The weighted solve on the statistics. Out of line: the solver's arrays
+/// take stack only while it runs, not during the artificial-data pass.
+#[inline(never)]
+fn weighted_solve<T: Real>(
+    stats: &Stats<T>,
     norm: &Normalization<T>,
-    ls: &Ellipsoid<T>,
     config: &Config,
-) -> Result<Estimate<T>, Error> {
-    let stats = Stats::accumulate(samples, norm, &ls.centre, &ls.w)?;
-    let objective = Adc1Objective::new(&stats, weight(&stats, norm, config)?);
+) -> Result<Minimum<T, PARAMS>, Error> {
+    let objective = Adc1Objective::new(stats, weight(stats, norm, config)?);
     check_gram(&objective.g)?;
     // The paper's 1e-6 step test is not a convergence test here: the
     // weighted Hessian 2 G (x) Wn has up to 12 distinct eigenvalues, BFGS
@@ -120,7 +119,19 @@ pub fn run<T: Real, S: Sample>(
     // level) instead.
     let mut opts = options(stats.count, T::one(), config.max_iterations);
     opts.step_tol = T::EPSILON * T::lit(16.0);
-    let m = bfgs(&objective, SVector::zeros(), &opts)?;
+    bfgs(&objective, SVector::zeros(), &opts)
+}
+
+/// ADC1 from the LS fit: artificial data (one pass), the noise weight, the
+/// weighted solve, then the canonical `W'`.
+pub fn run<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+) -> Result<Estimate<T>, Error> {
+    let stats = Stats::accumulate(samples, norm, &ls.centre, &ls.w)?;
+    let m = weighted_solve(&stats, norm, config)?;
     let th = theta(&m.x);
     let (dt, db) = split(&th);
     let t = ls.t + dt;

@@ -122,6 +122,10 @@ pub(crate) fn options<T: Real>(count: usize, weight_scale: T, max_iter: u32) -> 
 
 /// Runs ADC2 from the start `(t0, centre0)` whose artificial-data
 /// statistics are `stats`.
+///
+/// Out of line: the solver's arrays (the 12x12 inverse Hessian) then take
+/// stack only while it runs, not during the artificial-data pass.
+#[inline(never)]
 pub fn solve<T: Real>(
     stats: &Stats<T>,
     t0: &Matrix3<T>,
