@@ -37,6 +37,29 @@ pub(crate) fn from_array<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N,
     SMatrix::from_data(ArrayStorage(a))
 }
 
+/// The larger of two numbers, by one comparison (a NaN `a` is kept, a NaN
+/// `b` ignored). `T::max` goes through libm's `fmaxf`/`fmax`: a function
+/// call for NaN handling that callers here, on values already checked
+/// finite, do not need.
+#[inline(always)]
+pub(crate) fn larger<T: Real>(a: T, b: T) -> T {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The smaller of two numbers, by one comparison (see [`larger`]).
+#[inline(always)]
+pub(crate) fn smaller<T: Real>(a: T, b: T) -> T {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
 /// Eigenvalues and eigenvectors of a symmetric matrix, unsorted:
 /// `vectors[k]` belongs to `values[k]`, has unit length, and the vectors
 /// are orthogonal to rounding.
@@ -73,7 +96,7 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
     pub fn max(&self) -> T {
         let mut v = self.values.first().copied().unwrap_or_else(T::zero);
         for &x in &self.values {
-            v = v.max(x);
+            v = larger(v, x);
         }
         v
     }
@@ -129,8 +152,8 @@ pub(crate) fn min_max<T: Real, const N: usize>(values: &[T; N]) -> (T, T) {
     let first = values.first().copied().unwrap_or_else(T::zero);
     let (mut lo, mut hi) = (first, first);
     for &x in values {
-        lo = lo.min(x);
-        hi = hi.max(x);
+        lo = smaller(lo, x);
+        hi = larger(hi, x);
     }
     (lo, hi)
 }
@@ -151,7 +174,7 @@ fn jacobi<T: Real, const N: usize>(
             if !x.is_finite() {
                 return Err(Error::SingularSystem);
             }
-            scale = scale.max(x.abs());
+            scale = larger(scale, x.abs());
         }
     }
     if let Some(v) = v.as_deref_mut() {
@@ -255,7 +278,7 @@ pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T
         let mut norm2 = zero;
         let mut big = zero;
         for i in (k + 1)..N {
-            big = big.max(a[i][k].abs());
+            big = larger(big, a[i][k].abs());
         }
         if !(big > zero) {
             continue;
@@ -265,7 +288,8 @@ pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T
             v[i] = a[i][k] / big;
             norm2 += v[i] * v[i];
         }
-        let norm = norm2.sqrt();
+        // norm2 >= 1: the largest entry of v is 1 after the scaling.
+        let norm = norm2 * norm2.rsqrt();
         let mut alpha = norm;
         if let Some(first) = v.get_mut(k + 1) {
             if *first > zero {
@@ -390,7 +414,7 @@ pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
     let mut size = T::zero();
     for row in a {
         for &x in row {
-            size = size.max(x.abs());
+            size = larger(size, x.abs());
         }
     }
     if !(det.abs() > size * size * size * T::EPSILON) || !det.is_finite() {
