@@ -151,7 +151,7 @@ attribute() {
             n = name
             sub(/^[<&]+/, "", n)
             if (n ~ /^mag_cal_core::methods::(submle|iterated|adc1)/ || n ~ /^mag_cal_core::quasi_newton::Anderson/) c = "core-other-methods"
-            else if (n ~ /^mag_cal_core::calibrate/) c = "core-calibrate-fn"
+            else if (n ~ /^mag_cal_core::(calibrate|pipeline)/) c = "core-pipeline"
             else if (n ~ /^mag_cal_core/) c = "core-rest"
             else if (n ~ /^(nalgebra|simba)/) c = "nalgebra"
             else if (n ~ /^libm/) c = "libm"
@@ -162,7 +162,7 @@ attribute() {
         }
         END {
             line = "total=" total
-            split("core-calibrate-fn core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
+            split("core-pipeline core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
             for (i = 1; i <= 8; i++) line = line " " order[i] "=" sum[order[i]] + 0
             print line
         }' <(nm -S -C --defined-only "$1") <(nm -S -C --defined-only "$2")
