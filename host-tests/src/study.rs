@@ -52,22 +52,29 @@ pub fn estimate(fit: &Fit<f64>) -> Estimate {
 ///
 /// Every call makes three fixed passes: validation and centring (about 12
 /// flops a sample), the 35 moments (about 120: 9 powers, 35 products of
-/// three and the sums), and the radial RMS of the report (about 35). Then
-/// `passes` method passes: the artificial-data statistics of ADC1, ADC2 and
-/// each iterated-ADC2 step (about 70: `W (y - b)`, one reciprocal square
-/// root, 27 sums for `S_rh`, `S_rr`, `S_hh`), or one subMLE cost-and-gradient
+/// three and the sums), and the last pass with the final calibration: its
+/// radial error (about 30: `W (y - b)`, `|u|^2`, a reciprocal square root,
+/// the square) and, except for ADC1 and ADC2, which take them from their
+/// artificial-data pass, the direction sums of the coverage checks (about
+/// 20). Then `passes` method passes: the artificial-data statistics of
+/// ADC1, ADC2 and each iterated-ADC2 step (about 70: `W (y - b)`, one
+/// reciprocal square root, 24 sums), or one subMLE cost-and-gradient
 /// evaluation (about 140: `M e`, `z`, `w`, the symmetric 3x3 gradient
 /// update and the centre's). Counted from the core's loops; the small
 /// O(1) solves are neglected (a few thousand flops, against 2.4e5 for a
 /// whole ADC2 run at n = 1000).
 pub fn flop_proxy(method: Method, passes: u32) -> f64 {
-    const FIXED: f64 = 12.0 + 120.0 + 35.0;
+    const FIXED: f64 = 12.0 + 120.0 + 30.0;
+    let directions = match method {
+        Method::Adc1 | Method::Adc2 => 0.0,
+        _ => 20.0,
+    };
     let per_pass = match method {
         Method::SubMle => 140.0,
         Method::Ls => 0.0,
         _ => 70.0,
     };
-    FIXED + per_pass * f64::from(passes)
+    FIXED + directions + per_pass * f64::from(passes)
 }
 
 /// Per-run records of one method in one scenario.

@@ -603,7 +603,7 @@ fn render(
            {sub_passes:.0} in B, about {per_eval_ns:.0} ns per sample each): {:.0} us. Beyond \
            the shared LS9 fit, subMLE therefore costs {bmin:.0}-{bmax:.0}x ADC2, the order of \
            the paper's 43x; over the whole call {tmin:.1}-{tmax:.1}x, because the shared \
-           LS9 fit is about half of ADC2's time (the flop proxy of the fast test gives \
+           LS9 fit is {ls_share:.0} % of ADC2's time (the flop proxy of the fast test gives \
            {fmin:.0}-{fmax:.0}x). The paper's Matlab ratio also reflects interpreter overhead per \
            evaluation, which compiled code does not pay. ADC1 costs the same as ADC2 here (one \
            pass, one small solve), not the paper's 20x.\n\
@@ -614,6 +614,7 @@ fn render(
         moments_us,
         adc2_us - ls_us,
         sub_us - ls_us,
+        ls_share = 100.0 * ls_us / adc2_us,
     );
 
     // ------------------------------------------------------------ Table II
