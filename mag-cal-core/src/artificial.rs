@@ -22,14 +22,18 @@
 //! `S_rh + T0 S_hh`.)
 //!
 //! The pass itself needs neither `d` nor `T0`: with the radial error
-//! `e_i = |u_i| - 1`, `r_i = T0 (u_i - h_i) = e_i T0 h_i`, so
+//! `e_i = |u_i| - 1`, `r_i = T0 (u_i - h_i) = T0 g_i` with
+//! `g_i = u_i - h_i = e_i h_i`, so
 //!
 //! ```text
-//! s_r = T0 sum e_i h_i,   S_rh = T0 sum e_i h_i h_i^T,   S_rr = T0 (sum e_i^2 h_i h_i^T) T0^T
+//! s_r = T0 sum g_i,   S_rh = T0 sum g_i h_i^T,   S_rr = T0 (sum g_i g_i^T) T0^T
 //! ```
 //!
-//! and the samples feed 24 sums (`h`, `e h` and three symmetric matrices)
-//! instead of 27, each still a sum of small terms.
+//! and the samples feed 24 sums (`h`, `g` and three symmetric matrices:
+//! `g h^T = e h h^T` is one) instead of 27, each still a sum of small terms.
+//! Per sample the pass keeps `u` and `1/|u|`, then forms `h = u/|u|` and
+//! `g = u - h` (no cancellation: `u` and `h` are parallel and of nearly
+//! the same length, so the difference is exact up to the rounding of `h`).
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
@@ -95,7 +99,8 @@ impl<T: Real> Stats<T> {
         centre: &Vector3<T>,
         w: &Matrix3<T>,
     ) -> Result<Self, Error> {
-        let (count, total) = sums(samples, &Projector::new(norm, centre, w));
+        let mut total = [T::zero(); SUMS];
+        let count = sums(samples, &Projector::new(norm, centre, w), &mut total);
         if count < crate::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
@@ -115,29 +120,62 @@ impl<T: Real> Stats<T> {
         let s_eh = Vector3::new(t[3], t[4], t[5]);
         let s_ehh = sym(t[12], t[13], t[14], t[15], t[16], t[17]);
         let s_eehh = sym(t[18], t[19], t[20], t[21], t[22], t[23]);
-        let s_rr = t0 * s_eehh * t0.transpose();
+        let s_rr = product_t(&product(&t0, &s_eehh), &t0);
         Some(Self {
             count,
             s_h: Vector3::new(t[0], t[1], t[2]),
             s_hh: sym(t[6], t[7], t[8], t[9], t[10], t[11]),
-            s_r: t0 * s_eh,
-            s_rh: t0 * s_ehh,
+            s_r: Vector3::from(times(&t0, s_eh.into())),
+            s_rh: product(&t0, &s_ehh),
             // Symmetric to the last bit, as a sum of `r r^T` is.
             s_rr: (s_rr + s_rr.transpose()) * T::lit(0.5),
         })
     }
 }
 
-/// Number of per-sample sums: `h` (3), `e h` (3), then the upper triangles
-/// of `h h^T`, `e h h^T` and `e^2 h h^T` (6 each).
+/// `a b` for 3x3 matrices. Written out: nalgebra's generic product is a
+/// loop nest that costs several times the 27 multiply-adds on a
+/// Cortex-M4F.
+fn product<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
+    let [b0, b1, b2] = b.data.0;
+    Matrix3::from_columns(&[
+        times(a, b0).into(),
+        times(a, b1).into(),
+        times(a, b2).into(),
+    ])
+}
+
+/// `a b^T` for 3x3 matrices, written out (as [`product`]).
+fn product_t<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
+    let [b0, b1, b2] = b.data.0;
+    Matrix3::from_columns(&[
+        times(a, [b0[0], b1[0], b2[0]]).into(),
+        times(a, [b0[1], b1[1], b2[1]]).into(),
+        times(a, [b0[2], b1[2], b2[2]]).into(),
+    ])
+}
+
+/// `a v` for a 3x3 matrix, written out (as [`product`]).
+fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
+    // Columns of the storage: `a[column][row]`.
+    let [a0, a1, a2] = a.data.0;
+    [
+        a0[0] * x + a1[0] * y + a2[0] * z,
+        a0[1] * x + a1[1] * y + a2[1] * z,
+        a0[2] * x + a1[2] * y + a2[2] * z,
+    ]
+}
+
+/// Number of per-sample sums: `h` (3), `g = e h` (3), then the upper
+/// triangles of `h h^T`, `g h^T = e h h^T` and `g g^T = e^2 h h^T` (6 each).
 const SUMS: usize = 24;
 
-/// The count of the samples with a direction and their [`SUMS`] sums, in
-/// blocks of [`BLOCK`] samples. Not inlined: the buffer of directions is
-/// then the only large item of its stack frame.
+/// Adds the [`SUMS`] sums of the samples to `total` (zeros on entry), in
+/// blocks of [`BLOCK`] samples, and returns the count of the samples with a
+/// direction. Not inlined: the buffer of directions is then the only large
+/// item of its stack frame (and `total` lives in the caller's).
 #[inline(never)]
-fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>) -> (usize, [T; SUMS]) {
-    let mut total = [T::zero(); SUMS];
+fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>, total: &mut [T; SUMS]) -> usize {
     let mut count = 0usize;
     let mut buf = [[T::zero(); 4]; CHUNK];
     for block in samples.chunks(BLOCK) {
@@ -146,29 +184,37 @@ fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>) -> (usize, [T; SU
             count += directions(chunk, map, &mut buf);
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
-        for (t, v) in total.iter_mut().zip(a) {
-            *t += v;
+        // Four sums a step: one a step takes twice the instructions.
+        const { assert!(SUMS.is_multiple_of(4)) };
+        let quads = total
+            .as_chunks_mut::<4>()
+            .0
+            .iter_mut()
+            .zip(a.as_chunks::<4>().0);
+        for (t, v) in quads {
+            *t = [t[0] + v[0], t[1] + v[1], t[2] + v[2], t[3] + v[3]];
         }
     }
-    (count, total)
+    count
 }
 
 /// Samples whose directions are buffered between the two loops of the
 /// pass.
 ///
 /// The pass is two loops over each chunk, each a function of its own (not
-/// inlined): [`directions`] maps the samples to `[h, e]` and
+/// inlined): [`directions`] maps the samples to `[u, 1/|u|]` and
 /// [`add_directions`] adds the 24 sums. In one loop, the 24 sums, the map's
 /// 12 constants and the temporaries do not fit the Cortex-M4F's 32
 /// floating-point registers, and spills and register shuffles made the pass
 /// 153 instructions a sample (`f32`, `[i16; 3]`, opt-level "s"); split, each
-/// loop fits, and the pass takes 100 (about 56 + 34, and the chunk
-/// overhead). The buffer is 16 bytes a sample in `f32` (512 bytes of
-/// stack); 64 samples would save 1.5 instructions a sample for 512 bytes
-/// more.
-const CHUNK: usize = 32;
+/// loop fits: about 51 instructions a sample and 37, and the pass takes 94
+/// with the chunk and block overhead and the final 3x3 products. The
+/// buffer is 16 bytes a sample in `f32` (704 bytes of stack); 44 samples
+/// make three chunks of a [`BLOCK`] (32 took 1 instruction a sample more,
+/// 64 would save 0.8 for 320 bytes more).
+const CHUNK: usize = 44;
 
-/// `[h, e h]` of each sample of `chunk` into `out` (zeros for a sample
+/// `[u, 1/|u|]` of each sample of `chunk` into `out` (zeros for a sample
 /// without a direction: non-finite, or at the fitted centre), and the count
 /// of the samples with a direction.
 #[inline(never)]
@@ -177,21 +223,21 @@ fn directions<T: Real, S: Sample>(
     map: &Projector<T>,
     out: &mut [[T; 4]; CHUNK],
 ) -> usize {
-    let mut count = 0;
+    let mut count = chunk.len();
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
         *slot = match direction(sample, map) {
-            Some(v) => {
-                count += 1;
-                v
+            Some(v) => v,
+            None => {
+                count -= 1;
+                [T::zero(); 4]
             }
-            None => [T::zero(); 4],
         };
     }
     count
 }
 
-/// `[h, e h]` of one sample, with `e = |u| - 1`; `None` when the sample is
-/// not finite or lies at the fitted centre (no direction).
+/// `[u, 1/|u|]` of one sample; `None` when the sample is not finite or
+/// lies at the fitted centre (no direction).
 #[inline(always)]
 fn direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option<[T; 4]> {
     let [ux, uy, uz] = map.project(finite::<T, S>(sample)?);
@@ -199,18 +245,18 @@ fn direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option<[T; 4
     if !(q >= T::MIN_POSITIVE) {
         return None;
     }
-    let inv = q.rsqrt();
-    let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
-    let e = q * inv - T::one();
-    Some([hx, hy, hz, e])
+    Some([ux, uy, uz, q.rsqrt()])
 }
 
-/// Adds the sums of `[h, g = e h]` over `dirs` to `a`.
+/// Adds the sums of `h = u/|u|` and `g = u - h = e h` over `dirs` (each
+/// `[u, 1/|u|]`; zeros add nothing) to `a`. One sample a step: two would
+/// not fit the registers.
 #[inline(never)]
 fn add_directions<T: Real>(a: &mut [T; SUMS], dirs: &[[T; 4]]) {
     let mut s = *a;
-    for &[hx, hy, hz, e] in dirs {
-        let (gx, gy, gz) = (hx * e, hy * e, hz * e);
+    for &[ux, uy, uz, inv] in dirs {
+        let (hx, hy, hz) = (ux * inv, uy * inv, uz * inv);
+        let (gx, gy, gz) = (ux - hx, uy - hy, uz - hz);
         s[0] += hx;
         s[1] += hy;
         s[2] += hz;
@@ -308,8 +354,8 @@ mod tests {
     }
 
     /// The pass's sums of `h`, `e h` and `e^k h h^T`, mapped through `T0`,
-    /// are the statistics of the definition; a non-finite sample and one at
-    /// the fitted centre are skipped.
+    /// are the statistics of the definition; a non-finite sample and those
+    /// at the fitted centre are skipped, at any length of the last chunk.
     #[test]
     fn the_pass_matches_the_definition() {
         let mut rng = Rng(7);
@@ -330,21 +376,25 @@ mod tests {
         samples[5] = [f64::NAN, 1.0, 2.0];
         let centre = norm.point_back(&b0);
         samples[9] = [centre.x, centre.y, centre.z];
-        let got = Stats::accumulate(&samples, &norm, &b0, &w0).unwrap();
-        let want = by_definition(&samples, &norm, &b0, &w0);
-        assert_eq!(got.count, 298);
-        assert_eq!(want.count, 298);
+        samples[296] = [centre.x, centre.y, centre.z];
         let close = |a: &[f64], b: &[f64]| {
             a.iter()
                 .zip(b)
                 .all(|(x, y)| (x - y).abs() <= 1e-9 * (1.0 + y.abs()))
         };
-        assert!(close(got.s_h.as_slice(), want.s_h.as_slice()));
-        assert!(close(got.s_hh.as_slice(), want.s_hh.as_slice()));
-        assert!(close(got.s_r.as_slice(), want.s_r.as_slice()));
-        assert!(close(got.s_rh.as_slice(), want.s_rh.as_slice()));
-        assert!(close(got.s_rr.as_slice(), want.s_rr.as_slice()));
-        assert_eq!(got.s_rr, got.s_rr.transpose());
+        for n in [300, 299, 298, 297] {
+            let samples = &samples[..n];
+            let got = Stats::accumulate(samples, &norm, &b0, &w0).unwrap();
+            let want = by_definition(samples, &norm, &b0, &w0);
+            assert_eq!(got.count, n - 3);
+            assert_eq!(want.count, n - 3);
+            assert!(close(got.s_h.as_slice(), want.s_h.as_slice()));
+            assert!(close(got.s_hh.as_slice(), want.s_hh.as_slice()));
+            assert!(close(got.s_r.as_slice(), want.s_r.as_slice()));
+            assert!(close(got.s_rh.as_slice(), want.s_rh.as_slice()));
+            assert!(close(got.s_rr.as_slice(), want.s_rr.as_slice()));
+            assert_eq!(got.s_rr, got.s_rr.transpose());
+        }
     }
 
     #[test]
