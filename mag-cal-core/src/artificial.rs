@@ -60,6 +60,30 @@ pub struct Stats<T: Real> {
 }
 
 impl<T: Real> Stats<T> {
+    /// No samples yet (for tests that build statistics by hand).
+    #[cfg(test)]
+    pub(crate) fn empty() -> Self {
+        Self {
+            count: 0,
+            s_h: Vector3::zeros(),
+            s_hh: Matrix3::zeros(),
+            s_r: Vector3::zeros(),
+            s_rh: Matrix3::zeros(),
+            s_rr: Matrix3::zeros(),
+        }
+    }
+
+    /// Adds one direction `h` and its residual `r`, by the definition.
+    #[cfg(test)]
+    pub(crate) fn add(&mut self, h: Vector3<T>, r: Vector3<T>) {
+        self.count += 1;
+        self.s_h += h;
+        self.s_hh += h * h.transpose();
+        self.s_r += r;
+        self.s_rh += r * h.transpose();
+        self.s_rr += r * r.transpose();
+    }
+
     /// `Q = [S_rh | s_r]` (3x4): residuals against the regressors `[h, 1]`.
     pub fn q(&self) -> Matrix3x4<T> {
         let mut q = Matrix3x4::zeros();
@@ -324,14 +348,7 @@ mod tests {
         w0: &Matrix3<f64>,
     ) -> Stats<f64> {
         let t0 = w0.try_inverse().unwrap();
-        let mut s = Stats {
-            count: 0,
-            s_h: Vector3::zeros(),
-            s_hh: Matrix3::zeros(),
-            s_r: Vector3::zeros(),
-            s_rh: Matrix3::zeros(),
-            s_rr: Matrix3::zeros(),
-        };
+        let mut s = Stats::empty();
         for y in samples {
             if !y.iter().all(|v| v.is_finite()) {
                 continue;
@@ -342,13 +359,7 @@ mod tests {
                 continue;
             }
             let h = u / u.norm();
-            let r = d - t0 * h;
-            s.count += 1;
-            s.s_h += h;
-            s.s_hh += h * h.transpose();
-            s.s_r += r;
-            s.s_rh += r * h.transpose();
-            s.s_rr += r * r.transpose();
+            s.add(h, d - t0 * h);
         }
         s
     }

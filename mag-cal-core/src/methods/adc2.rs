@@ -205,26 +205,14 @@ mod tests {
     /// directions, residuals that are an exact affine function of `[h, 1]`
     /// plus a wobble, accumulated by hand.
     fn stats() -> Stats<f64> {
-        let mut s = Stats {
-            count: 0,
-            s_h: Vector3::zeros(),
-            s_hh: Matrix3::zeros(),
-            s_r: Vector3::zeros(),
-            s_rh: Matrix3::zeros(),
-            s_rr: Matrix3::zeros(),
-        };
+        let mut s = Stats::empty();
         for i in 0..40 {
             let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / 40.0;
             let (r, phi) = (libm::sqrt(1.0 - z * z), f64::from(i) * 2.4);
             let h = Vector3::new(r * libm::cos(phi), r * libm::sin(phi), z);
             let wobble = 0.01 * libm::sin(f64::from(i) * 1.7);
             let res = Vector3::new(0.05 * h.x - 0.02, 0.03 * h.z + wobble, -0.04 * h.y + 0.01);
-            s.count += 1;
-            s.s_h += h;
-            s.s_hh += h * h.transpose();
-            s.s_r += res;
-            s.s_rh += res * h.transpose();
-            s.s_rr += res * res.transpose();
+            s.add(h, res);
         }
         s
     }
