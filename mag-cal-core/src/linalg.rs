@@ -403,14 +403,16 @@ pub(crate) fn cholesky_inverse<T: Real, const N: usize>(l: &Mat<T, N>) -> Mat<T,
     inv
 }
 
-/// Solves `a x = b` for a 3x3 matrix by Cramer's rule on the cofactors, or
-/// `None` when `a` is singular to working precision (relative to the size
-/// of its entries) or the result is not finite.
-pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
-    let c00 = a[1][1] * a[2][2] - a[1][2] * a[2][1];
-    let c01 = a[1][2] * a[2][0] - a[1][0] * a[2][2];
-    let c02 = a[1][0] * a[2][1] - a[1][1] * a[2][0];
-    let det = a[0][0] * c00 + a[0][1] * c01 + a[0][2] * c02;
+/// The inverse of a 3x3 matrix (the adjugate over the determinant), or
+/// `None` when it is singular to working precision (relative to the size of
+/// its entries) or the result is not finite.
+pub(crate) fn inverse3<T: Real>(a: &Mat<T, 3>) -> Option<Mat<T, 3>> {
+    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = *a;
+    // Cofactors of the first row, then the rest.
+    let c00 = a11 * a22 - a12 * a21;
+    let c01 = a12 * a20 - a10 * a22;
+    let c02 = a10 * a21 - a11 * a20;
+    let det = a00 * c00 + a01 * c01 + a02 * c02;
     let mut size = T::zero();
     for row in a {
         for &x in row {
@@ -420,18 +422,29 @@ pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
     if !(det.abs() > size * size * size * T::EPSILON) || !det.is_finite() {
         return None;
     }
-    let c10 = a[0][2] * a[2][1] - a[0][1] * a[2][2];
-    let c11 = a[0][0] * a[2][2] - a[0][2] * a[2][0];
-    let c12 = a[0][1] * a[2][0] - a[0][0] * a[2][1];
-    let c20 = a[0][1] * a[1][2] - a[0][2] * a[1][1];
-    let c21 = a[0][2] * a[1][0] - a[0][0] * a[1][2];
-    let c22 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
-    // x = adj(a) b / det, adj = cofactor matrix transposed.
-    let x = [
-        (c00 * b[0] + c10 * b[1] + c20 * b[2]) / det,
-        (c01 * b[0] + c11 * b[1] + c21 * b[2]) / det,
-        (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det,
+    let c10 = a02 * a21 - a01 * a22;
+    let c11 = a00 * a22 - a02 * a20;
+    let c12 = a01 * a20 - a00 * a21;
+    let c20 = a01 * a12 - a02 * a11;
+    let c21 = a02 * a10 - a00 * a12;
+    let c22 = a00 * a11 - a01 * a10;
+    // The inverse is the transposed cofactor matrix over the determinant.
+    let inv = [
+        [c00 / det, c10 / det, c20 / det],
+        [c01 / det, c11 / det, c21 / det],
+        [c02 / det, c12 / det, c22 / det],
     ];
+    inv.iter().flatten().all(|v| v.is_finite()).then_some(inv)
+}
+
+/// Solves `a x = b` for a 3x3 matrix through [`inverse3`], or `None` when
+/// `a` is singular to working precision or the result is not finite.
+pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
+    let inv = inverse3(a)?;
+    let mut x = [T::zero(); 3];
+    for i in 0..3 {
+        x[i] = inv[i][0] * b[0] + inv[i][1] * b[1] + inv[i][2] * b[2];
+    }
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
@@ -665,6 +678,18 @@ mod tests {
         assert!(cholesky(&indefinite).is_none());
         assert!(cholesky(&[[f64::NAN]]).is_none());
         assert!(cholesky(&[[0.0]]).is_none());
+    }
+
+    #[test]
+    fn inverse3_of_a_general_matrix() {
+        let m = [[2.0, -1.0, 0.5], [0.3, 1.5, -0.7], [0.1, 0.4, 3.0]];
+        let inv = inverse3(&m).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let p: f64 = (0..3).map(|k| m[i][k] * inv[k][j]).sum();
+                assert!((p - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            }
+        }
     }
 
     #[test]
