@@ -93,8 +93,8 @@ pub fn fit_with<T: Real>(s: &SMatrix<T, 10, 10>, solve: Solve<T>) -> Result<Elli
     from_quadric(&solve(s)?)
 }
 
-// Out of line: its arrays then occupy stack only during the call (see
-// docs/benchmarks.md, stack).
+/// `v = [v9, -1]` with `S9 v9 = sum phi9` (Cholesky). Out of line: its
+/// arrays then occupy stack only during the call (docs/benchmarks.md).
 #[inline(never)]
 fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);
@@ -116,9 +116,8 @@ fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     Ok(v)
 }
 
-/// `v` = eigenvector of the smallest eigenvalue of `S`.
-// Out of line: its arrays then occupy stack only during the call (see
-// docs/benchmarks.md, stack).
+/// `v` = eigenvector of the smallest eigenvalue of `S`. Out of line, as
+/// [`ls9`].
 #[inline(never)]
 fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let eig = sym_eigen(&to_array(s))?;

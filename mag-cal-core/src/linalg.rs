@@ -1,14 +1,16 @@
 //! Small dense linear algebra on fixed-size arrays: a cyclic Jacobi
-//! symmetric eigen-decomposition, Cholesky factorisation and solves, and the
-//! symmetric square roots of 3x3 matrices.
+//! symmetric eigen-decomposition, Cholesky factorisation and triangular
+//! solves, a Householder reduction to tridiagonal form, a 3x3 inverse and
+//! solve, and the symmetric square roots of 3x3 matrices.
 //!
 //! Why not nalgebra's decompositions: they index with run-time indices
 //! behind assertions, and those panic paths survive optimisation in the
 //! firmware build (the link proof, `no-panic-check/`, listed them); their
 //! generic code also cost flash and stack on the Cortex-M4F
 //! (`docs/benchmarks.md`). Here every index runs over `0..N` of an
-//! `[[T; N]; N]`, which the compiler checks once at compile time, and every
-//! iteration is capped. Matrices are symmetric where it matters, so the
+//! `[[T; N]; N]`, so the optimiser can prove each bounds check true and
+//! remove it (the link proof checks that none is left), and every iteration
+//! is capped. Matrices are symmetric where it matters, so the
 //! row/column order of nalgebra's column-major storage does not.
 
 // Index loops are the matrix notation here (`a[i][k] * x[k]`); zipped
@@ -119,10 +121,13 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
 ///
 /// The matrix is first divided by its largest entry, so no square
 /// overflows. A rotation is skipped (and its entry zeroed) once
-/// `|a_pq| <= eps sqrt(|a_pp a_qq|)`, the criterion under which Jacobi
-/// gives every eigenvalue to high relative accuracy; the sweep in which
-/// nothing rotates ends the method. Non-finite entries give
-/// [`Error::SingularSystem`], a sweep cap hit [`Error::NoConvergence`].
+/// `|a_pq| <= eps sqrt(|a_pp a_qq|)`; the sweep in which nothing rotates
+/// ends the method. Every eigenvalue is then accurate to a few `eps` of the
+/// largest, and for a definite matrix even the small ones to a few `eps` of
+/// themselves. Non-finite entries give [`Error::SingularSystem`], a sweep
+/// cap hit [`Error::NoConvergence`]. Eigenvalues of finite entries near the
+/// type's maximum can overflow to infinity (e.g. `2 MAX`); callers refuse
+/// them through their `!(x > limit)`-style checks.
 pub(crate) fn sym_eigen<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<SymEigen<T, N>, Error> {
     let mut eig = SymEigen {
         values: [T::zero(); N],
@@ -264,10 +269,11 @@ fn jacobi<T: Real, const N: usize>(
     })
 }
 
-/// Householder reduction of a symmetric matrix (its lower triangle is
-/// read) to tridiagonal form with the same eigenvalues: the diagonal `d`
-/// and the off-diagonal `e` (`e[i]` couples `i` and `i + 1`; the last entry
-/// is zero). A direct method: `N - 2` reflections, no iteration.
+/// Householder reduction of a symmetric matrix to tridiagonal form with the
+/// same eigenvalues: the diagonal `d` and the off-diagonal `e` (`e[i]`
+/// couples `i` and `i + 1`; the last entry is zero). A direct method: one
+/// reflection per column, no iteration. The entries must be finite (the
+/// caller checks): a NaN would end in a finite, wrong result.
 pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T; N]) {
     let zero = T::zero();
     let two = T::lit(2.0);
@@ -407,19 +413,24 @@ pub(crate) fn cholesky_inverse<T: Real, const N: usize>(l: &Mat<T, N>) -> Mat<T,
 /// `None` when it is singular to working precision (relative to the size of
 /// its entries) or the result is not finite.
 pub(crate) fn inverse3<T: Real>(a: &Mat<T, 3>) -> Option<Mat<T, 3>> {
-    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = *a;
-    // Cofactors of the first row, then the rest.
-    let c00 = a11 * a22 - a12 * a21;
-    let c01 = a12 * a20 - a10 * a22;
-    let c02 = a10 * a21 - a11 * a20;
-    let det = a00 * c00 + a01 * c01 + a02 * c02;
+    // Divided by its largest entry first, so that the determinant neither
+    // underflows nor overflows; the inverse is scaled back at the end.
     let mut size = T::zero();
     for row in a {
         for &x in row {
             size = larger(size, x.abs());
         }
     }
-    if !(det.abs() > size * size * size * T::EPSILON) || !det.is_finite() {
+    if !(size > T::zero()) || !size.is_finite() {
+        return None;
+    }
+    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = a.map(|row| row.map(|x| x / size));
+    // Cofactors of the first row, then the rest.
+    let c00 = a11 * a22 - a12 * a21;
+    let c01 = a12 * a20 - a10 * a22;
+    let c02 = a10 * a21 - a11 * a20;
+    let det = a00 * c00 + a01 * c01 + a02 * c02;
+    if !(det.abs() > T::EPSILON) {
         return None;
     }
     let c10 = a02 * a21 - a01 * a22;
@@ -428,11 +439,13 @@ pub(crate) fn inverse3<T: Real>(a: &Mat<T, 3>) -> Option<Mat<T, 3>> {
     let c20 = a01 * a12 - a02 * a11;
     let c21 = a02 * a10 - a00 * a12;
     let c22 = a00 * a11 - a01 * a10;
-    // The inverse is the transposed cofactor matrix over the determinant.
+    // The inverse is the transposed cofactor matrix over the determinant,
+    // and over the scale.
+    let k = det * size;
     let inv = [
-        [c00 / det, c10 / det, c20 / det],
-        [c01 / det, c11 / det, c21 / det],
-        [c02 / det, c12 / det, c22 / det],
+        [c00 / k, c10 / k, c20 / k],
+        [c01 / k, c11 / k, c21 / k],
+        [c02 / k, c12 / k, c22 / k],
     ];
     inv.iter().flatten().all(|v| v.is_finite()).then_some(inv)
 }
@@ -688,6 +701,22 @@ mod tests {
             for j in 0..3 {
                 let p: f64 = (0..3).map(|k| m[i][k] * inv[k][j]).sum();
                 assert!((p - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn inverse3_is_scale_free() {
+        for scale in [1e-30f32, 1e-14, 1.0, 1e13, 1e30] {
+            let m = [
+                [2.0 * scale, 0.0, 0.0],
+                [0.0, scale, 0.0],
+                [0.0, 0.0, 4.0 * scale],
+            ];
+            let inv = inverse3(&m).unwrap();
+            let want = [0.5 / scale, 1.0 / scale, 0.25 / scale];
+            for i in 0..3 {
+                assert!((inv[i][i] / want[i] - 1.0).abs() < 1e-6, "{scale}: {inv:?}");
             }
         }
     }

@@ -299,7 +299,8 @@ fn direction_figures<T: Real>(d: &DirectionSums<T>) -> Result<(T, T), Error> {
     let gram_condition = if gmin > T::zero() {
         gmax / gmin
     } else {
-        T::max_value().unwrap_or(T::one())
+        // Singular to rounding: as ill-conditioned as the figure can say.
+        T::lit(f64::from(f32::MAX))
     };
     Ok((coverage, gram_condition))
 }

@@ -145,8 +145,8 @@ pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
     let mut x = x0;
     let (mut cost, mut g) = f.cost_grad(&x);
     // The inverse-Hessian approximation, row by row. It stays exactly
-    // symmetric: the start is, and each entry of the update below is
-    // computed by the same commutative expression as its mirror.
+    // symmetric: the start is, and the update below computes the lower
+    // triangle and copies it to the upper one.
     let mut h_inv = [[T::zero(); N]; N];
     set_identity(&mut h_inv);
     let mut scaled = false;

@@ -27,13 +27,14 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     /// `1 / sqrt(x)` for a positive normal `x`, to the type's precision.
     ///
     /// `f32`: the classic bit-level initial guess (`to_bits`, safe) refined
-    /// by three Newton steps (relative error below 1e-7, the type's own),
+    /// by three Newton steps (relative error below 3e-7, 2.5 ulp),
     /// because `no_std` has only a software square root (`libm::sqrtf`,
     /// about 90 instructions on a Cortex-M4F, plus a division). `f64`:
     /// `1 / libm::sqrt(x)`. The result for zero, negative, subnormal or
     /// non-finite `x` is unspecified (but never a panic): callers check.
     fn rsqrt(self) -> Self;
-    /// The cube root of a positive normal `x`, to the type's precision.
+    /// The cube root of a positive normal `x` (`f32`: relative error below
+    /// 2.5e-7, 2 ulp).
     ///
     /// `f32`: a bit-level initial guess refined by Newton steps in `f32`
     /// (libm's `cbrtf` computes in `f64`, which on a Cortex-M4F pulls in

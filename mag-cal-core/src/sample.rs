@@ -17,7 +17,8 @@ pub trait Sample: Copy {
     /// Whether [`Sample::xyz`] is finite for every value of the type, in
     /// both working precisions (true of the integer types). The passes then
     /// skip the per-sample finiteness check. Defaults to `false`: a type that
-    /// claims `true` wrongly feeds non-finite values into the sums.
+    /// claims `true` wrongly feeds non-finite values into the sums, and the fit
+    /// then ends in [`crate::Error::OutOfRange`] instead of skipping them.
     const ALWAYS_FINITE: bool = false;
 }
 

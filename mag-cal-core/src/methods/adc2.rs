@@ -136,10 +136,10 @@ pub fn solve<T: Real>(
     check_gram(&objective.g)?;
     let opts = options(stats.count, T::one(), max_iter);
     let m = bfgs(&objective, SVector::zeros(), &opts)?;
-    let th = theta(&m.x);
+    let (dt, db) = split(&theta(&m.x));
     Ok(Adc2Solution {
-        t: t0 + split(&th).0,
-        centre: centre0 + split(&th).1,
+        t: t0 + dt,
+        centre: centre0 + db,
         iterations: m.iterations,
         cost: m.cost,
     })
@@ -158,20 +158,19 @@ pub fn solve_closed_form<T: Real>(
     check_gram(&g)?;
     let l = cholesky(&to_array(&g)).ok_or(Error::SingularSystem)?;
     // Theta G = Q  <=>  G Theta^T = Q^T (G symmetric): row r of Theta
-    // solves G x = (row r of Q).
-    let q = stats.q();
-    let mut th = Matrix3x4::zeros();
-    for r in 0..3 {
-        let x = cholesky_solve(&l, &[q[(r, 0)], q[(r, 1)], q[(r, 2)], q[(r, 3)]]);
-        for (c, &v) in x.iter().enumerate() {
-            th[(r, c)] = v;
-        }
-    }
+    // solves G x = (row r of Q). Rows of the column-major storage are read
+    // by whole columns, no run-time index.
+    let [[q00, q10, q20], [q01, q11, q21], [q02, q12, q22], [q03, q13, q23]] = stats.q().data.0;
+    let [a0, a1, a2, a3] = cholesky_solve(&l, &[q00, q01, q02, q03]);
+    let [b0, b1, b2, b3] = cholesky_solve(&l, &[q10, q11, q12, q13]);
+    let [c0, c1, c2, c3] = cholesky_solve(&l, &[q20, q21, q22, q23]);
+    let th = Matrix3x4::new(a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3);
     let objective = Adc2Objective::new(stats);
     let (cost, _) = objective.cost_grad(&SVector::from_column_slice(th.as_slice()));
+    let (dt, db) = split(&th);
     Ok(Adc2Solution {
-        t: t0 + split(&th).0,
-        centre: centre0 + split(&th).1,
+        t: t0 + dt,
+        centre: centre0 + db,
         iterations: 0,
         cost,
     })
