@@ -4,8 +4,8 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 use crate::linalg::{
-    cholesky, cholesky_solve, from_array, solve3, solve_lower, solve_lower_transposed, sym_eigen,
-    sym_sqrt_and_inv_sqrt, to_array,
+    cholesky, cholesky_solve, from_array, min_max, solve3, solve_lower, solve_lower_transposed,
+    sym_eigen, sym_sqrt_and_inv_sqrt, to_array,
 };
 use crate::moments::Moments;
 use crate::{Error, Real};
@@ -210,7 +210,7 @@ fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error
         kmat[j] = solve_lower(&l, &row);
     }
     let eig = sym_eigen(&kmat)?;
-    if !(eig.max() > zero) {
+    if !(min_max(&eig.values).1 > zero) {
         return Err(Error::NotAnEllipsoid);
     }
     let v1 = solve_lower_transposed(&l, &eig.max_vector());

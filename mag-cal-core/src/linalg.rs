@@ -94,15 +94,6 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
         k
     }
 
-    /// Largest eigenvalue (zero for `N = 0`).
-    pub fn max(&self) -> T {
-        let mut v = self.values.first().copied().unwrap_or_else(T::zero);
-        for &x in &self.values {
-            v = larger(v, x);
-        }
-        v
-    }
-
     /// The eigenvector of the smallest eigenvalue.
     pub fn min_vector(&self) -> [T; N] {
         let k = self.argmin();
@@ -461,45 +452,41 @@ pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// `V f(Lambda) V^T` for a symmetric positive definite 3x3 matrix, for two
-/// functions at once; [`Error::NotAnEllipsoid`] when an eigenvalue is not
-/// clearly positive.
-fn sym_functions<T: Real>(
-    m: &Matrix3<T>,
-    f: impl Fn(T) -> T,
-    g: impl Fn(T) -> T,
-) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
+/// The eigen-decomposition of a symmetric positive definite 3x3 matrix, or
+/// [`Error::NotAnEllipsoid`] when an eigenvalue is not clearly positive.
+fn positive_definite_eigen<T: Real>(m: &Matrix3<T>) -> Result<SymEigen<T, 3>, Error> {
     let eig = sym_eigen(&to_array(m))?;
-    let max = eig.max().abs();
+    let (_, max) = min_max(&eig.values);
     // A positive definite matrix whose smallest eigenvalue is lost in the
     // rounding of the largest is numerically singular.
     if !eig
         .values
         .iter()
-        .all(|&l| l > max * T::EPSILON * T::lit(8.0))
+        .all(|&l| l > max.abs() * T::EPSILON * T::lit(8.0))
     {
         return Err(Error::NotAnEllipsoid);
     }
+    Ok(eig)
+}
+
+/// `V f(Lambda) V^T` from an eigen-decomposition, exactly symmetric.
+fn spectral<T: Real>(eig: &SymEigen<T, 3>, f: impl Fn(T) -> T) -> Matrix3<T> {
     let mut fm = [[T::zero(); 3]; 3];
-    let mut gm = [[T::zero(); 3]; 3];
     for (v, &l) in eig.vectors.iter().zip(&eig.values) {
-        let (fl, gl) = (f(l), g(l));
+        let fl = f(l);
         for i in 0..3 {
             for j in i..3 {
-                let vv = v[i] * v[j];
-                fm[i][j] += fl * vv;
-                gm[i][j] += gl * vv;
+                fm[i][j] += fl * (v[i] * v[j]);
             }
         }
     }
-    // Exactly symmetric: the lower triangle mirrors the upper.
+    // The lower triangle mirrors the upper.
     for i in 0..3 {
         for j in 0..i {
             fm[i][j] = fm[j][i];
-            gm[i][j] = gm[j][i];
         }
     }
-    Ok((from_array(fm), from_array(gm)))
+    from_array(fm)
 }
 
 /// `1 / sqrt(l)` for a positive `l`: [`Real::rsqrt`] where it is defined
@@ -516,17 +503,21 @@ fn inv_sqrt<T: Real>(l: T) -> T {
 pub(crate) fn sym_sqrt_and_inv_sqrt<T: Real>(
     m: &Matrix3<T>,
 ) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
-    sym_functions(m, |l| l * inv_sqrt(l), inv_sqrt)
+    let eig = positive_definite_eigen(m)?;
+    Ok((
+        spectral(&eig, |l| l * inv_sqrt(l)),
+        spectral(&eig, inv_sqrt),
+    ))
 }
 
 /// The symmetric positive definite square root `M^(1/2)`.
 pub(crate) fn sym_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    Ok(sym_functions(m, |l| l * inv_sqrt(l), |_| T::zero())?.0)
+    Ok(spectral(&positive_definite_eigen(m)?, |l| l * inv_sqrt(l)))
 }
 
 /// The symmetric positive definite inverse square root `M^(-1/2)`.
 pub(crate) fn sym_inv_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    Ok(sym_functions(m, inv_sqrt, |_| T::zero())?.0)
+    Ok(spectral(&positive_definite_eigen(m)?, inv_sqrt))
 }
 
 #[cfg(test)]
