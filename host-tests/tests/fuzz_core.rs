@@ -54,6 +54,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use host_tests::sim;
 use mag_cal_core::align::{procrustes, AlignedCalibration};
 use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, wrap_deg, HeadingSmoother};
@@ -71,23 +72,20 @@ const SLOW_SECS: u64 = 5;
 
 // --- The generator -----------------------------------------------------------
 
-/// SplitMix64: tiny, fast, and good enough to spread cases.
-struct Rng(u64);
+/// The case generator: the host tests' SplitMix64 (`sim::Rng`) with the
+/// draws the fuzz cases need.
+struct Rng(sim::Rng);
 
 impl Rng {
     /// The generator of case `index` under `seed`.
     fn for_case(seed: u64, index: u64) -> Self {
-        let mut r = Rng(seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let mut r = Rng(sim::Rng(seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15)));
         r.next();
         r
     }
 
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in `0..n` (`n > 0`).

@@ -38,22 +38,21 @@ use serde_json::Value;
 
 const DEFAULT_SEED: u64 = 0x6d61_6763_616c_0002;
 
-/// SplitMix64.
-struct Rng(u64);
+/// The host tests' SplitMix64 (`host_tests::sim::Rng`), with the draws
+/// the file generator needs.
+struct Rng(host_tests::sim::Rng);
 
 impl Rng {
     fn for_case(seed: u64, index: u64) -> Self {
-        let mut r = Rng(seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let mut r = Rng(host_tests::sim::Rng(
+            seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        ));
         r.next();
         r
     }
 
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     fn below(&mut self, n: u64) -> u64 {
@@ -608,7 +607,7 @@ fn env_u64(name: &str) -> Option<u64> {
 
 /// A valid calibration file: `magcal fit --format json` on clean data.
 fn valid_calibration(dir: &std::path::Path) -> Vec<u8> {
-    let mut rng = Rng(7);
+    let mut rng = Rng(host_tests::sim::Rng(7));
     let rows = ellipsoid_rows(&mut rng, 300);
     let data = dir.join("clean.csv");
     std::fs::write(&data, rows.join("\n")).expect("write clean data");
