@@ -1017,6 +1017,52 @@ fn legend(svg: &mut Svg, x: f64, y: f64, items: &[(&str, &str)], dashed_last: bo
     }
 }
 
+/// The frame of a grouped-bar chart over the scenarios: title, and a y
+/// axis from 0 to `ymax` with ticks every `step`.
+fn scenario_chart(
+    groups: usize,
+    ymax: f64,
+    step: f64,
+    title: &str,
+    y_label: &str,
+    tick: impl Fn(f64) -> String,
+) -> (Svg, Frame) {
+    let mut svg = Svg::new(820.0, 420.0);
+    let f = Frame {
+        x0: 70.0,
+        y0: 50.0,
+        w: 600.0,
+        h: 310.0,
+        xmin: 0.0,
+        xmax: groups as f64,
+        ymin: 0.0,
+        ymax,
+        log_y: false,
+    };
+    svg.text(f.x0 + f.w / 2.0, 28.0, "middle", 15.0, title);
+    let ticks: Vec<f64> = (0..=((ymax / step).round() as usize))
+        .map(|k| k as f64 * step)
+        .collect();
+    f.y_axis(&mut svg, &ticks, y_label, tick);
+    (svg, f)
+}
+
+/// The scenario letters under the groups of a [`scenario_chart`], and the
+/// x caption.
+fn scenario_labels(svg: &mut Svg, f: &Frame, table: &[ScenarioStudy], caption: &str) {
+    let group = f.w / table.len() as f64;
+    for (g, s) in table.iter().enumerate() {
+        svg.text(
+            f.x0 + (g as f64 + 0.5) * group,
+            f.y0 + f.h + 20.0,
+            "middle",
+            14.0,
+            &s.scenario.id.to_string(),
+        );
+    }
+    svg.text(f.x0 + f.w / 2.0, f.y0 + f.h + 44.0, "middle", 13.0, caption);
+}
+
 /// Grouped bars: mean e_S of each method relative to LS9, per scenario.
 fn svg_es_ratio(table: &[ScenarioStudy]) -> String {
     let shown = [
@@ -1038,38 +1084,23 @@ fn svg_es_ratio(table: &[ScenarioStudy]) -> String {
         .fold(1.0f64, |a, &b| a.max(b))
         .max(1.0);
     let ymax = ((top * 1.05) / 0.2).ceil() * 0.2;
-    let mut svg = Svg::new(820.0, 420.0);
-    let f = Frame {
-        x0: 70.0,
-        y0: 50.0,
-        w: 600.0,
-        h: 310.0,
-        xmin: 0.0,
-        xmax: table.len() as f64,
-        ymin: 0.0,
+    let (mut svg, f) = scenario_chart(
+        table.len(),
         ymax,
-        log_y: false,
-    };
-    svg.text(
-        f.x0 + f.w / 2.0,
-        28.0,
-        "middle",
-        15.0,
+        0.2,
         &format!(
             "Mean scale error e_S relative to LS9 ({} runs per scenario)",
             table[0].runs()
         ),
+        "e_S / e_S(LS9)",
+        |t| format!("{t:.1}"),
     );
-    let ticks: Vec<f64> = (0..=((ymax / 0.2).round() as usize))
-        .map(|k| k as f64 * 0.2)
-        .collect();
-    f.y_axis(&mut svg, &ticks, "e_S / e_S(LS9)", |t| format!("{t:.1}"));
     let group = f.w / table.len() as f64;
     let bar = group * 0.8 / shown.len() as f64;
-    for (g, s) in table.iter().enumerate() {
+    for (g, row) in ratios.iter().enumerate() {
         let gx = f.x0 + g as f64 * group + group * 0.1;
         for (k, &m) in shown.iter().enumerate() {
-            let v = ratios[g][k];
+            let v = row[k];
             let y = f.py(v);
             svg.rect(
                 gx + k as f64 * bar + 1.0,
@@ -1079,13 +1110,6 @@ fn svg_es_ratio(table: &[ScenarioStudy]) -> String {
                 COLOURS[idx(m)],
             );
         }
-        svg.text(
-            f.x0 + (g as f64 + 0.5) * group,
-            f.y0 + f.h + 20.0,
-            "middle",
-            14.0,
-            &s.scenario.id.to_string(),
-        );
     }
     svg.line(
         f.x0,
@@ -1094,11 +1118,10 @@ fn svg_es_ratio(table: &[ScenarioStudy]) -> String {
         f.py(1.0),
         r#"stroke="black" stroke-width="1.5" stroke-dasharray="6,4""#,
     );
-    svg.text(
-        f.x0 + f.w / 2.0,
-        f.y0 + f.h + 44.0,
-        "middle",
-        13.0,
+    scenario_labels(
+        &mut svg,
+        &f,
+        table,
         "scenario (A, B, E, F: full sphere; C, D, G: +-30 deg band)",
     );
     let mut items: Vec<(&str, &str)> = shown
@@ -1120,61 +1143,32 @@ fn svg_time(table: &[ScenarioStudy]) -> String {
     let hi = med.iter().flatten().fold(0.0f64, |a, &b| a.max(b));
     let step = if hi > 500.0 { 100.0 } else { 50.0 };
     let ymax = (hi * 1.05 / step).ceil() * step;
-    let mut svg = Svg::new(820.0, 420.0);
-    let f = Frame {
-        x0: 70.0,
-        y0: 50.0,
-        w: 600.0,
-        h: 310.0,
-        xmin: 0.0,
-        xmax: table.len() as f64,
-        ymin: 0.0,
+    let (mut svg, f) = scenario_chart(
+        table.len(),
         ymax,
-        log_y: false,
-    };
-    svg.text(
-        f.x0 + f.w / 2.0,
-        28.0,
-        "middle",
-        15.0,
+        step,
         "Median time of calibrate (n = 1000, f64): LS9 fit + the method",
+        "time (us)",
+        |t| format!("{t:.0}"),
     );
-    let ticks: Vec<f64> = (0..=((ymax / step).round() as usize))
-        .map(|k| k as f64 * step)
-        .collect();
-    f.y_axis(&mut svg, &ticks, "time (us)", |t| format!("{t:.0}"));
     let group = f.w / table.len() as f64;
     let bar = group * 0.8 / METHODS.len() as f64;
-    for (g, s) in table.iter().enumerate() {
+    for (g, row) in med.iter().enumerate() {
         let gx = f.x0 + g as f64 * group + group * 0.1;
-        let ls = med[g][idx(Method::Ls)];
-        for k in 0..METHODS.len() {
+        let ls = row[idx(Method::Ls)];
+        for (k, &t) in row.iter().enumerate() {
             let x = gx + k as f64 * bar + 1.0;
-            let base = ls.min(med[g][k]);
+            let base = ls.min(t);
             svg.rect(x, f.py(base), bar - 2.0, f.py(0.0) - f.py(base), COLOURS[0]);
-            if med[g][k] > base {
-                svg.rect(
-                    x,
-                    f.py(med[g][k]),
-                    bar - 2.0,
-                    f.py(base) - f.py(med[g][k]),
-                    COLOURS[k],
-                );
+            if t > base {
+                svg.rect(x, f.py(t), bar - 2.0, f.py(base) - f.py(t), COLOURS[k]);
             }
         }
-        svg.text(
-            f.x0 + (g as f64 + 0.5) * group,
-            f.y0 + f.h + 20.0,
-            "middle",
-            14.0,
-            &s.scenario.id.to_string(),
-        );
     }
-    svg.text(
-        f.x0 + f.w / 2.0,
-        f.y0 + f.h + 44.0,
-        "middle",
-        13.0,
+    scenario_labels(
+        &mut svg,
+        &f,
+        table,
         "scenario (bars: LS9, subMLE, ADC1, ADC2, ADC2-iter)",
     );
     let mut items: Vec<(&str, &str)> = vec![("LS9 fit (all)", COLOURS[0])];
