@@ -227,6 +227,26 @@ fn ratio2(a: Option<(f64, f64)>, b: Option<(f64, f64)>) -> String {
     )
 }
 
+/// The table of same-run ratios (ADC2/LS, subMLE/ADC2, iterated/ADC2,
+/// ADC1/ADC2) per n, from the times `get` returns, formatted by `fmt`.
+fn ratio_table<V: Copy>(
+    get: impl Fn(Method, usize) -> Option<V>,
+    fmt: impl Fn(Option<V>, Option<V>) -> String,
+) {
+    println!("| n | adc2/ls | submle/adc2 | adc2-iter/adc2 | adc1/adc2 |");
+    println!("|---|---|---|---|---|");
+    for n in NS {
+        let adc2 = get(Method::Adc2, n);
+        println!(
+            "| {n} | {} | {} | {} | {} |",
+            fmt(adc2, get(Method::Ls, n)),
+            fmt(get(Method::SubMle, n), adc2),
+            fmt(get(Method::Adc2Iterated, n), adc2),
+            fmt(get(Method::Adc1, n), adc2),
+        );
+    }
+}
+
 /// The summary of this run, from criterion's files.
 fn summary(start: SystemTime) {
     let dir = output_directory();
@@ -270,18 +290,7 @@ fn summary(start: SystemTime) {
             println!();
         }
         println!("\n{precision}: same-run ratios, median (min)");
-        println!("| n | adc2/ls | submle/adc2 | adc2-iter/adc2 | adc1/adc2 |");
-        println!("|---|---|---|---|---|");
-        for n in NS {
-            let adc2 = get(precision, Method::Adc2, n);
-            println!(
-                "| {n} | {} | {} | {} | {} |",
-                ratio2(adc2, get(precision, Method::Ls, n)),
-                ratio2(get(precision, Method::SubMle, n), adc2),
-                ratio2(get(precision, Method::Adc2Iterated, n), adc2),
-                ratio2(get(precision, Method::Adc1, n), adc2),
-            );
-        }
+        ratio_table(|m, n| get(precision, m, n), ratio2);
         println!("\n{precision}: growth with n, t(10 n) / t(n), median (min); 10 = linear");
         print!("| method |");
         for w in NS.windows(2) {
@@ -364,18 +373,7 @@ fn interleaved_summary(data: &[(usize, Vec<[i16; 3]>)]) {
             println!();
         }
         println!("\n{precision}: ratios of the best times");
-        println!("| n | adc2/ls | submle/adc2 | adc2-iter/adc2 | adc1/adc2 |");
-        println!("|---|---|---|---|---|");
-        for n in NS {
-            let adc2 = get(Method::Adc2, n);
-            println!(
-                "| {n} | {} | {} | {} | {} |",
-                ratio(adc2, get(Method::Ls, n)),
-                ratio(get(Method::SubMle, n), adc2),
-                ratio(get(Method::Adc2Iterated, n), adc2),
-                ratio(get(Method::Adc1, n), adc2),
-            );
-        }
+        ratio_table(get, ratio);
         println!("\n{precision}: growth of the best times, t(10 n) / t(n); 10 = linear");
         print!("| method |");
         for w in NS.windows(2) {
