@@ -305,13 +305,7 @@ fn main() -> ! {
     // Whole calibrations at the headline n.
     let samples = fill(buf, N);
     let mut adc2_total = None;
-    for method in [
-        Method::Ls,
-        Method::Adc2,
-        Method::Adc2Iterated,
-        Method::SubMle,
-        Method::Adc1,
-    ] {
+    for method in Method::ALL {
         let r = calibration(&timer, method.name(), samples, method);
         ok &= r.is_some();
         if method == Method::Adc2 {

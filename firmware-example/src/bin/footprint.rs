@@ -244,13 +244,7 @@ fn stack_run() -> ! {
     let samples = store.as_slice();
 
     let mut ok = true;
-    for method in [
-        Method::Ls,
-        Method::Adc2,
-        Method::Adc2Iterated,
-        Method::SubMle,
-        Method::Adc1,
-    ] {
+    for method in Method::ALL {
         match stack_of(samples, method) {
             Some(bytes) => println!(
                 "STACK {=str} n={=usize} bytes={=usize}",
