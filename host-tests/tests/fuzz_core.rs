@@ -76,35 +76,23 @@ const SLOW_SECS: u64 = 5;
 /// draws the fuzz cases need.
 struct Rng(sim::Rng);
 
+impl std::ops::Deref for Rng {
+    type Target = sim::Rng;
+    fn deref(&self) -> &sim::Rng {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Rng {
+    fn deref_mut(&mut self) -> &mut sim::Rng {
+        &mut self.0
+    }
+}
+
 impl Rng {
     /// The generator of case `index` under `seed`.
     fn for_case(seed: u64, index: u64) -> Self {
-        let mut r = Rng(sim::Rng(seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15)));
-        r.next();
-        r
-    }
-
-    fn next(&mut self) -> u64 {
-        self.0.next_u64()
-    }
-
-    /// Uniform in `0..n` (`n > 0`).
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-
-    fn index(&mut self, n: usize) -> usize {
-        self.below(n as u64) as usize
-    }
-
-    /// True with probability `p`.
-    fn chance(&mut self, p: f64) -> bool {
-        self.unit() < p
-    }
-
-    /// Uniform in `[0, 1)`.
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        Rng(sim::Rng::for_case(seed, index))
     }
 
     /// Uniform in `[lo, hi)`.
@@ -147,7 +135,7 @@ impl Rng {
     /// ordinary number of any magnitude.
     fn any_f64(&mut self) -> f64 {
         match self.below(16) {
-            0..=2 => f64::from_bits(self.next()),
+            0..=2 => f64::from_bits(self.next_u64()),
             3 => self.special_f64(),
             4 => self.special_f64(),
             5 => f64::from(self.any_f32()),
@@ -160,7 +148,7 @@ impl Rng {
 
     /// One of the values that break arithmetic.
     fn special_f64(&mut self) -> f64 {
-        let nan_payload = f64::from_bits(0x7ff0_0000_0000_0000 | (self.next() >> 12 | 1));
+        let nan_payload = f64::from_bits(0x7ff0_0000_0000_0000 | (self.next_u64() >> 12 | 1));
         let values = [
             f64::NAN,
             -f64::NAN,
@@ -202,9 +190,9 @@ impl Rng {
     /// An `f32` of any class.
     fn any_f32(&mut self) -> f32 {
         match self.below(8) {
-            0..=2 => f32::from_bits(self.next() as u32),
+            0..=2 => f32::from_bits(self.next_u64() as u32),
             3 => {
-                let payload = f32::from_bits(0x7f80_0000 | ((self.next() as u32) >> 9 | 1));
+                let payload = f32::from_bits(0x7f80_0000 | ((self.next_u64() as u32) >> 9 | 1));
                 let values = [
                     f32::NAN,
                     -f32::NAN,
@@ -655,7 +643,7 @@ fn calibrate_case(seed: u64, index: u64) -> Result<u64, String> {
                 y.iter().map(|v| v.map(|c| c as i16)).collect()
             } else {
                 (0..y.len())
-                    .map(|_| [0; 3].map(|_: i16| rng.next() as i16))
+                    .map(|_| [0; 3].map(|_: i16| rng.next_u64() as i16))
                     .collect()
             };
             run!(s)
@@ -665,7 +653,7 @@ fn calibrate_case(seed: u64, index: u64) -> Result<u64, String> {
                 y.iter().map(|v| v.map(|c| c as i32)).collect()
             } else {
                 (0..y.len())
-                    .map(|_| [0; 3].map(|_: i32| rng.next() as i32))
+                    .map(|_| [0; 3].map(|_: i32| rng.next_u64() as i32))
                     .collect()
             };
             run!(s)
@@ -865,7 +853,7 @@ fn others_case(seed: u64, index: u64) -> Result<u64, String> {
     // SampleStore beyond its capacity.
     let mut store: SampleStore<[i16; 3], 8> = SampleStore::new();
     for i in 0..rng.below(12) {
-        let r = store.push([i as i16, 0, rng.next() as i16]);
+        let r = store.push([i as i16, 0, rng.next_u64() as i16]);
         if (i < 8) != r.is_ok() || (r.is_err() && r != Err(Error::CapacityExceeded)) {
             return Err(format!("SampleStore push {i}: {r:?}"));
         }
@@ -960,7 +948,7 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
             bytes.to_vec()
         }
         Err(_) => (0..persist::ENCODED_LEN)
-            .map(|_| rng.next() as u8)
+            .map(|_| rng.next_u64() as u8)
             .collect(),
     };
     let valid = persist::from_bytes::<f64>(&record).is_ok();
@@ -970,7 +958,7 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
             let i = rng.index(record.len());
             let old = record[i];
             record[i] = loop {
-                let b = rng.next() as u8;
+                let b = rng.next_u64() as u8;
                 if b != old {
                     break b;
                 }
@@ -982,11 +970,11 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
             true
         }
         3 => {
-            record.extend((0..rng.index(10)).map(|_| rng.next() as u8));
+            record.extend((0..rng.index(10)).map(|_| rng.next_u64() as u8));
             false // trailing bytes are ignored
         }
         _ => {
-            record = (0..rng.index(200)).map(|_| rng.next() as u8).collect();
+            record = (0..rng.index(200)).map(|_| rng.next_u64() as u8).collect();
             true
         }
     };

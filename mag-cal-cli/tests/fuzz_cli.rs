@@ -42,33 +42,23 @@ const DEFAULT_SEED: u64 = 0x6d61_6763_616c_0002;
 /// the file generator needs.
 struct Rng(host_tests::sim::Rng);
 
+impl std::ops::Deref for Rng {
+    type Target = host_tests::sim::Rng;
+    fn deref(&self) -> &host_tests::sim::Rng {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Rng {
+    fn deref_mut(&mut self) -> &mut host_tests::sim::Rng {
+        &mut self.0
+    }
+}
+
 impl Rng {
+    /// The generator of case `index` under `seed`.
     fn for_case(seed: u64, index: u64) -> Self {
-        let mut r = Rng(host_tests::sim::Rng(
-            seed ^ index.wrapping_mul(0x9e37_79b9_7f4a_7c15),
-        ));
-        r.next();
-        r
-    }
-
-    fn next(&mut self) -> u64 {
-        self.0.next_u64()
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-
-    fn index(&mut self, n: usize) -> usize {
-        self.below(n as u64) as usize
-    }
-
-    fn chance(&mut self, p: f64) -> bool {
-        ((self.next() >> 11) as f64 / (1u64 << 53) as f64) < p
-    }
-
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        Rng(host_tests::sim::Rng::for_case(seed, index))
     }
 
     fn pick<'a, T>(&mut self, items: &'a [T]) -> &'a T {
@@ -76,19 +66,19 @@ impl Rng {
     }
 
     fn bytes(&mut self, n: usize) -> Vec<u8> {
-        (0..n).map(|_| self.next() as u8).collect()
+        (0..n).map(|_| self.next_u64() as u8).collect()
     }
 
     /// A number as a logger (or an adversary) might write it.
     fn number(&mut self) -> String {
         match self.below(14) {
             0 => self.pick(&NON_FINITE).to_string(),
-            1 => format!("{:e}", f64::from_bits(self.next())),
-            2 => format!("{}", f64::from_bits(self.next())),
-            3 => format!("{}", f32::from_bits(self.next() as u32)),
+            1 => format!("{:e}", f64::from_bits(self.next_u64())),
+            2 => format!("{}", f64::from_bits(self.next_u64())),
+            3 => format!("{}", f32::from_bits(self.next_u64() as u32)),
             4 => self.pick(&EXTREME).to_string(),
-            5 => format!("{}", self.next() as i64),
-            6 => format!("{}", self.next() as i16),
+            5 => format!("{}", self.next_u64() as i64),
+            6 => format!("{}", self.next_u64() as i16),
             7 => {
                 // Odd but parseable or not: leading '+', '.5', '5.', '1e+3',
                 // '0x10', '1_000', ' 1 ', '1,5', '−1' (U+2212), digits only.
@@ -391,7 +381,7 @@ fn calibration_file(rng: &mut Rng, valid: &[u8]) -> Vec<u8> {
             let mut v = valid.to_vec();
             if !v.is_empty() {
                 let i = rng.index(v.len());
-                v[i] = rng.next() as u8;
+                v[i] = rng.next_u64() as u8;
             }
             v
         }
