@@ -564,7 +564,7 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
                     what()
                 ));
             }
-            if r.samples_used + r.samples_dropped != samples.len() {
+            if r.samples_used + r.samples_dropped + r.screened + r.rejected != samples.len() {
                 return Err(format!(
                     "used + dropped != len {}: {}",
                     samples.len(),

@@ -71,7 +71,10 @@ fn check<T: Real>(y: &[[f64; 3]]) -> Result<(), TestCaseError> {
                 prop_assert!(c.soft_iron().iter().all(|v| v.is_finite()));
                 prop_assert!(c.field_strength() > T::zero() && c.field_strength().is_finite());
                 prop_assert_eq!(
-                    fit.report.samples_used + fit.report.samples_dropped,
+                    fit.report.samples_used
+                        + fit.report.samples_dropped
+                        + fit.report.screened
+                        + fit.report.rejected,
                     y.len()
                 );
             }

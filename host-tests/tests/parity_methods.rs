@@ -9,6 +9,13 @@
 use host_tests::reference::{self, RefFit, RefLs};
 use mag_cal_core::{calibrate, Config, Fit, Method};
 
+/// The plain estimators, which the reference implements: outlier handling
+/// off (the robust pipeline has its own tests, `tests/robust.rs`).
+const PLAIN: Config = Config {
+    robust: false,
+    ..Config::DEFAULT
+};
+
 use host_tests::sim::scenario_samples as scenario;
 
 /// max|dM| / max|M| and |db| / rho.
@@ -34,14 +41,14 @@ fn adc1_equals_closed_form_adc2_for_any_noise_weight() {
         let want = reference::adc2(&y, RefLs::Ls9).unwrap();
         let estimated = Config {
             method: Method::Adc1,
-            ..Config::default()
+            ..PLAIN
         };
         // A deliberately wrong, strongly anisotropic, correlated covariance:
         // the minimiser must not move.
         let given = Config {
             method: Method::Adc1,
             noise_covariance: Some([[4e-4, 1e-4, 0.0], [1e-4, 1e-2, -2e-3], [0.0, -2e-3, 2.5e-3]]),
-            ..Config::default()
+            ..PLAIN
         };
         for cfg in [estimated, given] {
             let fit = calibrate::<f64, _>(&y, &cfg).unwrap();
@@ -66,7 +73,7 @@ fn adc1_rejects_an_invalid_noise_covariance() {
         let cfg = Config {
             method: Method::Adc1,
             noise_covariance: Some(bad),
-            ..Config::default()
+            ..PLAIN
         };
         assert_eq!(
             calibrate::<f64, _>(&y, &cfg).unwrap_err(),
@@ -86,7 +93,7 @@ fn iterated_adc2_reaches_the_plain_fixed_point() {
             method: Method::Adc2Iterated,
             pass_tolerance: Some(1e-12),
             max_passes: 200,
-            ..Config::default()
+            ..PLAIN
         };
         let fit = calibrate::<f64, _>(&y, &cfg).unwrap();
         assert!(!fit.report.warnings.contains(mag_cal_core::Warning::PassCap));
@@ -106,7 +113,7 @@ fn iterated_adc2_hitting_the_cap_is_reported() {
     let cfg = Config {
         method: Method::Adc2Iterated,
         max_passes: 2,
-        ..Config::default()
+        ..PLAIN
     };
     let fit = calibrate::<f64, _>(&y, &cfg).unwrap();
     assert_eq!(fit.report.passes, 2);
@@ -123,7 +130,7 @@ fn submle_matches_an_independent_minimiser() {
             &y,
             &Config {
                 method: Method::SubMle,
-                ..Config::default()
+                ..PLAIN
             },
         )
         .unwrap();
@@ -143,10 +150,7 @@ fn f32_methods_agree_with_f64() {
     let y32: Vec<[f32; 3]> = y.iter().map(|v| v.map(|c| c as f32)).collect();
     let y64: Vec<[f64; 3]> = y32.iter().map(|v| v.map(f64::from)).collect();
     for method in Method::ALL {
-        let cfg = Config {
-            method,
-            ..Config::default()
-        };
+        let cfg = Config { method, ..PLAIN };
         let a = calibrate::<f64, _>(&y64, &cfg).unwrap().calibration;
         let b = calibrate::<f32, _>(&y32, &cfg).unwrap().calibration;
         let dm = (b.shape().map(f64::from) - a.shape()).amax() / a.shape().amax();

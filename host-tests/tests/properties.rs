@@ -4,7 +4,7 @@
 
 use host_tests::sim::{make_samples_axes, sphere, Rng};
 use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
-use mag_cal_core::{calibrate, Config, Fit, LsVariant, Method};
+use mag_cal_core::{calibrate, Calibration, Config, Error, Fit, LsVariant, Method};
 use proptest::prelude::*;
 
 /// A random distortion `T = U diag(s) V^T`, singular values in 0.5..2.
@@ -54,6 +54,14 @@ const ALL: [(Method, LsVariant); 7] = [
     (Method::Adc2Iterated, LsVariant::Ls9),
 ];
 
+/// The plain estimators are invariant to rounding. With outlier handling
+/// the 0/1 weights are a hard cut: a row at the cut may change sides when
+/// rounding moves the robust sigma by an ulp, and the fit then moves by
+/// that row's influence, a few `sigma / n` (seen: 1.7e-3 in M for one row
+/// of 300 at noise 0.03 with a 4:1 distortion, in 1 of 3000 cases; 1e-6 to
+/// 3e-5 in 10 more).
+const MODES: [(bool, f64); 2] = [(false, 1e-10), (true, 1e-2)];
+
 /// Li and Griffiths' constraint `4J - I^2 > 0` holds for `M`: only then can
 /// that variant represent the ellipsoid at all.
 fn li_griffiths_representable(m: &Matrix3<f64>) -> bool {
@@ -63,6 +71,31 @@ fn li_griffiths_representable(m: &Matrix3<f64>) -> bool {
         - m[(0, 2)].powi(2)
         - m[(1, 2)].powi(2);
     4.0 * j - i * i > 0.0
+}
+
+/// The two fits of a transformed pair: both refused for the same reason
+/// (`None`), or both calibrated. Li and Griffiths' fit of an ellipsoid it
+/// cannot represent is wrong, and the fit error refuses it: in both frames.
+fn pair(
+    label: &str,
+    a: Result<Fit<f64>, Error>,
+    c: Result<Fit<f64>, Error>,
+) -> Result<Option<(Calibration<f64>, Calibration<f64>)>, TestCaseError> {
+    match (a, c) {
+        (Ok(a), Ok(c)) => Ok(Some((a.calibration, c.calibration))),
+        (Err(a), Err(c)) if core::mem::discriminant(&a) == core::mem::discriminant(&c) => {
+            prop_assert!(
+                label.contains("LiGriffiths"),
+                "{label}: both refused: {a:?}"
+            );
+            Ok(None)
+        }
+        (a, c) => Err(TestCaseError::fail(format!(
+            "{label}: {:?} vs {:?}",
+            a.map(|f| f.report.quality),
+            c.map(|f| f.report.quality)
+        ))),
+    }
 }
 
 fn m_err(fit: &Fit<f64>, m: &Matrix3<f64>) -> f64 {
@@ -110,11 +143,13 @@ proptest! {
         let mut p = y.clone();
         p.rotate_left(shift % y.len());
         p.reverse();
-        for (method, ls) in ALL {
-            let a = calibrate::<f64, _>(&y, &config(method, ls)).unwrap().calibration;
-            let c = calibrate::<f64, _>(&p, &config(method, ls)).unwrap().calibration;
-            prop_assert!((a.shape() - c.shape()).amax() < 1e-10 * a.shape().amax());
-            prop_assert!((a.hard_iron() - c.hard_iron()).norm() < 1e-10 * a.field_strength());
+        for ((method, ls), (robust, tol)) in ALL.into_iter().flat_map(|m| MODES.map(|r| (m, r))) {
+            let label = format!("{method:?} {ls:?} robust {robust}");
+            let cfg = Config { robust, ..config(method, ls) };
+            let Some((a, c)) = pair(&label, calibrate(&y, &cfg), calibrate(&p, &cfg))? else { continue };
+            let dm = (a.shape() - c.shape()).amax() / a.shape().amax();
+            prop_assert!(dm < tol, "{label}: {dm:e}");
+            prop_assert!((a.hard_iron() - c.hard_iron()).norm() < tol * a.field_strength());
         }
     }
 
@@ -140,14 +175,17 @@ proptest! {
         let y = make_samples_axes(&t, &Vector3::new(0.4, -0.1, 0.2), &sphere(300, &mut rng), [0.03; 3], &mut rng);
         let qy: Vec<[f64; 3]> = y.iter().map(|v| (q * Vector3::from(*v)).into()).collect();
         for (method, ls) in ALL.into_iter().filter(|(_, ls)| *ls != LsVariant::Svd10) {
+            // Plain estimators: the robust path's coordinate-wise median
+            // centre (screening, crude start) depends on the frame.
             let cfg = Config {
                 pass_tolerance: Some(1e-11),
                 max_passes: 200,
+                robust: false,
                 ..config(method, ls)
             };
             let tol = if method == Method::SubMle { 1e-4 } else { 1e-9 };
-            let a = calibrate::<f64, _>(&y, &cfg).unwrap().calibration;
-            let c = calibrate::<f64, _>(&qy, &cfg).unwrap().calibration;
+            let label = format!("{method:?} {ls:?}");
+            let Some((a, c)) = pair(&label, calibrate(&y, &cfg), calibrate(&qy, &cfg))? else { continue };
             let want_m = q * a.shape() * q.transpose();
             prop_assert!((c.shape() - want_m).amax() < tol * want_m.amax(), "{method:?} {ls:?}");
             prop_assert!((c.hard_iron() - q * a.hard_iron()).norm() < tol * a.field_strength());
@@ -161,12 +199,15 @@ proptest! {
         let mut rng = Rng(seed);
         let y = make_samples_axes(&t, &Vector3::new(0.4, -0.1, 0.2), &sphere(300, &mut rng), [0.03; 3], &mut rng);
         let ky: Vec<[f64; 3]> = y.iter().map(|v| v.map(|c| c * k)).collect();
-        for (method, ls) in ALL {
-            let a = calibrate::<f64, _>(&y, &config(method, ls)).unwrap().calibration;
-            let c = calibrate::<f64, _>(&ky, &config(method, ls)).unwrap().calibration;
-            prop_assert!((c.hard_iron() - a.hard_iron() * k).norm() < 1e-9 * k * a.field_strength());
-            prop_assert!((c.field_strength() - a.field_strength() * k).abs() < 1e-9 * k * a.field_strength());
-            prop_assert!((c.shape() * (k * k) - a.shape()).amax() < 1e-9 * a.shape().amax());
+        for ((method, ls), (robust, tol)) in ALL.into_iter().flat_map(|m| MODES.map(|r| (m, r))) {
+            let label = format!("{method:?} {ls:?} robust {robust}");
+            let cfg = Config { robust, ..config(method, ls) };
+            let Some((a, c)) = pair(&label, calibrate(&y, &cfg), calibrate(&ky, &cfg))? else { continue };
+            let tol = tol * 10.0;
+            let db = (c.hard_iron() - a.hard_iron() * k).norm() / (k * a.field_strength());
+            prop_assert!(db < tol, "{label}: {db:e}");
+            prop_assert!((c.field_strength() - a.field_strength() * k).abs() < tol * k * a.field_strength());
+            prop_assert!((c.shape() * (k * k) - a.shape()).amax() < tol * a.shape().amax());
         }
     }
 }

@@ -5,7 +5,7 @@
 use host_tests::real::read_xyz;
 use host_tests::reference::{self, RefLs};
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
-use mag_cal_core::{calibrate, Calibration, Config, LsVariant, Method};
+use mag_cal_core::{calibrate, Calibration, Config, LsVariant, Method, SampleClass};
 
 /// std/mean of `|W (y - b)|` over the samples.
 fn norm_spread(samples: &[[f64; 3]], cal: &Calibration<f64>) -> f64 {
@@ -27,9 +27,11 @@ fn fit_all(name: &str) -> Calibration<f64> {
         (LsVariant::Svd10, RefLs::Svd10),
         (LsVariant::LiGriffiths, RefLs::LiGriffiths),
     ] {
+        // The plain estimators, which the reference implements.
         let cfg = |method| Config {
             method,
             ls,
+            robust: false,
             ..Config::default()
         };
         let start = calibrate::<f64, _>(&y, &cfg(Method::Ls)).unwrap();
@@ -59,9 +61,60 @@ fn fit_all(name: &str) -> Calibration<f64> {
         let dm = (c32.shape().map(f64::from) - c.shape()).amax() / c.shape().amax();
         assert!(db < 1e-4 && dm < 1e-4, "{name} {ls:?} f32: {db:e} {dm:e}");
     }
-    calibrate::<f64, _>(&y, &Config::default())
-        .unwrap()
-        .calibration
+    robust_as_good(name, &y)
+}
+
+/// The default (robust) ADC2 fit against the plain one: it says what it
+/// left out, its hard iron stays within 0.5 % of the field of the plain
+/// fit's, and the calibrated norm of the rows it used spreads no more than
+/// the plain fit's over all rows. Returns the robust calibration.
+fn robust_as_good(name: &str, y: &[[f64; 3]]) -> Calibration<f64> {
+    let plain = Config {
+        robust: false,
+        ..Config::default()
+    };
+    let p = calibrate::<f64, _>(y, &plain).unwrap();
+    let r = calibrate::<f64, _>(y, &Config::default()).unwrap();
+    let rep = r.report;
+    let used: Vec<[f64; 3]> = rep
+        .selection
+        .classify(&r.calibration, y)
+        .zip(y)
+        .filter(|(c, _)| *c == SampleClass::Used)
+        .map(|(_, v)| *v)
+        .collect();
+    assert_eq!(
+        used.len(),
+        rep.samples_used,
+        "{name}: classify agrees with the report"
+    );
+    let (s_plain, s_robust) = (
+        norm_spread(y, &p.calibration),
+        norm_spread(&used, &r.calibration),
+    );
+    let db = (r.calibration.hard_iron() - p.calibration.hard_iron()).norm()
+        / p.calibration.field_strength();
+    println!(
+        "{name} robust: used {} dropped {:?} screened {} rejected {} fit error {:.4} lack of fit {:.2} \
+         robust passes {}; spread {s_robust:.6} (plain {s_plain:.6}), |db| {db:.2e} of the field",
+        rep.samples_used,
+        rep.drops,
+        rep.screened,
+        rep.rejected,
+        rep.quality.fit_error,
+        rep.quality.lack_of_fit,
+        rep.robust_passes,
+    );
+    assert_eq!(
+        rep.samples_used + rep.samples_dropped + rep.screened + rep.rejected,
+        y.len()
+    );
+    assert!(
+        s_robust <= s_plain * 1.0001,
+        "{name}: {s_robust} > {s_plain}"
+    );
+    assert!(db < 0.005, "{name}: {db}");
+    r.calibration
 }
 
 #[test]

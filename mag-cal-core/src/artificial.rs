@@ -37,10 +37,12 @@
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
-use crate::linalg::{from_array, inverse3, to_array};
+use crate::histogram::LogHistogram;
+use crate::linalg::{from_array, inverse3, larger, to_array};
 use crate::moments::BLOCK;
 use crate::normalize::{Normalization, Projector};
-use crate::sample::{finite, Sample};
+use crate::rules::{pieces, Gate};
+use crate::sample::Sample;
 use crate::{Error, Real};
 
 /// Sufficient statistics of the artificial data (normalised units).
@@ -124,15 +126,42 @@ impl<T: Real> Stats<T> {
         centre: &Vector3<T>,
         w: &Matrix3<T>,
     ) -> Result<Self, Error> {
+        let mut hist = LogHistogram::new();
+        let pass = Pass {
+            gate: &Gate::PLAIN,
+            limit: None,
+        };
+        Self::accumulate_with(samples, norm, centre, w, &pass, &mut hist).map(|(s, _)| s)
+    }
+
+    /// [`Stats::accumulate`] over the rows the pass's gate passes whose
+    /// radial residual `r = |u| - 1` under the start is within the pass's
+    /// limit (0/1 weights: a weighted ADC2 pass). Counts `|r|` of every
+    /// row the gate passes in `hist`, and returns the largest `|r|` and the
+    /// rows the gate passed.
+    pub(crate) fn accumulate_with<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        pass: &Pass<'_, T>,
+        hist: &mut LogHistogram,
+    ) -> Result<(Self, Residuals<T>), Error> {
         let mut total = [T::zero(); SUMS];
-        let count = sums(samples, &Projector::new(norm, centre, w), &mut total);
+        let mut res = Residuals {
+            passed: 0,
+            max: T::zero(),
+        };
+        let map = Projector::new(norm, centre, w);
+        let count = sums(samples, &map, pass, hist, &mut res, &mut total);
         if count < crate::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
                 required: crate::normalize::MIN_SAMPLES,
             });
         }
-        Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)
+        let stats = Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)?;
+        Ok((stats, res))
     }
 
     /// The statistics from the sums of the pass, or `None` when `W0` is
@@ -195,18 +224,44 @@ fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
 /// triangles of `h h^T`, `g h^T = e h h^T` and `g g^T = e^2 h h^T` (6 each).
 const SUMS: usize = 24;
 
+/// Which rows an artificial-data pass uses.
+#[derive(Clone, Copy)]
+pub(crate) struct Pass<'a, T: Real> {
+    /// The drop rules and the screening ball.
+    pub gate: &'a Gate<T>,
+    /// Rows with `||u| - 1|` above this are left out (none when `None`).
+    pub limit: Option<T>,
+}
+
+/// What a pass saw of the radial residuals of the rows its gate passed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Residuals<T: Real> {
+    /// Rows the gate passed.
+    pub passed: usize,
+    /// The largest `||u| - 1|`.
+    pub max: T,
+}
+
 /// Adds the [`SUMS`] sums of the samples to `total` (zeros on entry), in
 /// blocks of [`BLOCK`] samples, and returns the count of the samples with a
 /// direction. Not inlined: the buffer of directions is then the only large
 /// item of its stack frame (and `total` lives in the caller's).
 #[inline(never)]
-fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>, total: &mut [T; SUMS]) -> usize {
+fn sums<T: Real, S: Sample>(
+    samples: &[S],
+    map: &Projector<T>,
+    pass: &Pass<'_, T>,
+    hist: &mut LogHistogram,
+    res: &mut Residuals<T>,
+    total: &mut [T; SUMS],
+) -> usize {
     let mut count = 0usize;
     let mut buf = [[T::zero(); 4]; CHUNK];
-    for block in samples.chunks(BLOCK) {
+    for (block_prev, block) in pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];
-        for chunk in block.chunks(CHUNK) {
-            count += directions(chunk, map, &mut buf);
+        for (chunk_prev, chunk) in pieces(block, CHUNK) {
+            let prev = chunk_prev.or(block_prev);
+            count += directions(chunk, prev, map, pass, hist, res, &mut buf);
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
         // Four sums a step: one a step takes twice the instructions.
@@ -240,37 +295,53 @@ fn sums<T: Real, S: Sample>(samples: &[S], map: &Projector<T>, total: &mut [T; S
 const CHUNK: usize = 44;
 
 /// `[u, 1/|u|]` of each sample of `chunk` into `out` (zeros for a sample
-/// without a direction: non-finite, or at the fitted centre), and the count
-/// of the samples with a direction.
+/// without a direction: dropped by the gate, at the fitted centre, or
+/// beyond the pass's limit), the residuals of the rows the gate passes
+/// counted in `hist` and `res`, and the count of the samples with a
+/// direction. `prev` is the row before the chunk.
 #[inline(never)]
 fn directions<T: Real, S: Sample>(
     chunk: &[S],
+    prev: Option<&S>,
     map: &Projector<T>,
+    pass: &Pass<'_, T>,
+    hist: &mut LogHistogram,
+    res: &mut Residuals<T>,
     out: &mut [[T; 4]; CHUNK],
 ) -> usize {
-    let mut count = chunk.len();
+    let mut count = 0;
+    let mut last = prev;
+    let limit = pass.limit.unwrap_or(T::MAX);
+    let mut max = res.max;
+    let mut passed = 0;
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
-        *slot = match direction(sample, map) {
-            Some(v) => v,
-            None => {
-                count -= 1;
-                [T::zero(); 4]
-            }
+        let row = pass.gate.pass(sample, last);
+        last = Some(sample);
+        *slot = [T::zero(); 4];
+        let Some(y) = row else {
+            continue;
         };
+        passed += 1;
+        let [ux, uy, uz] = map.project(y);
+        let q = ux * ux + uy * uy + uz * uz;
+        if !(q >= T::MIN_POSITIVE) {
+            // At the fitted centre: no direction, residual -1.
+            hist.add(T::one());
+            max = larger(max, T::one());
+            continue;
+        }
+        let inv = q.rsqrt();
+        let r = (q * inv - T::one()).abs();
+        hist.add(r);
+        max = larger(max, r);
+        if r <= limit {
+            *slot = [ux, uy, uz, inv];
+            count += 1;
+        }
     }
+    res.max = max;
+    res.passed += passed;
     count
-}
-
-/// `[u, 1/|u|]` of one sample; `None` when the sample is not finite or
-/// lies at the fitted centre (no direction).
-#[inline(always)]
-fn direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option<[T; 4]> {
-    let [ux, uy, uz] = map.project(finite::<T, S>(sample)?);
-    let q = ux * ux + uy * uy + uz * uz;
-    if !(q >= T::MIN_POSITIVE) {
-        return None;
-    }
-    Some([ux, uy, uz, q.rsqrt()])
 }
 
 /// Adds the sums of `h = u/|u|` and `g = u - h = e h` over `dirs` (each

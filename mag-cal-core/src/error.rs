@@ -7,7 +7,7 @@ use core::fmt;
 /// Every input, however malformed, ends either in a calibration or in one of
 /// these values; the core never panics. The enum is `Copy` and small so that
 /// firmware can log or store it without ceremony.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum Error {
@@ -57,6 +57,35 @@ pub enum Error {
     PoorCoverage,
     /// The fitted field strength is too far from the expected one.
     FieldStrengthMismatch,
+    /// The samples do not lie on a sphere after calibration: the robust
+    /// fit error is too large. The device lay still or was barely moved,
+    /// or the rows are not one magnetometer's readings (a filled cloud).
+    NoSphere {
+        /// Robust fit error (standard deviation of `|u| - 1`).
+        fit_error: f32,
+        /// The limit it exceeds.
+        limit: f32,
+    },
+    /// Too many rows are outliers to trust the rest: more than the limit's
+    /// share of the rows kept by the rules were screened out or rejected
+    /// by their residual.
+    TooManyOutliers {
+        /// Rows screened out or rejected.
+        rejected: usize,
+        /// Rows kept by the rules.
+        valid: usize,
+        /// The share that may be rejected.
+        limit: f32,
+    },
+    /// The calibrated samples sit systematically off the unit sphere in
+    /// some region of directions: a disturbance displaced part of the
+    /// trajectory, or an ellipsoid does not describe the sensor.
+    SystematicMisfit {
+        /// The lack-of-fit figure.
+        lack_of_fit: f32,
+        /// The limit it exceeds.
+        limit: f32,
+    },
     /// Stored calibration bytes end early.
     Truncated,
     /// Stored calibration bytes do not start with the expected magic.
@@ -75,7 +104,7 @@ impl fmt::Display for Error {
         match *self {
             Error::TooFewSamples { found, required } => write!(
                 f,
-                "too few usable samples: {found} finite, at least {required} required"
+                "too few usable samples: {found} kept, at least {required} required"
             ),
             Error::AllSamplesEqual => f.write_str("all samples are equal: no spread to fit"),
             Error::OutOfRange => f.write_str(
@@ -110,6 +139,26 @@ impl fmt::Display for Error {
             Error::FieldStrengthMismatch => {
                 f.write_str("fitted field strength too far from the expected value")
             }
+            Error::NoSphere { fit_error, limit } => write!(
+                f,
+                "the samples do not lie on a sphere (fit error {fit_error:.3} of the field, limit {limit:.2}): \
+                 the device was not rotated, or these are not one magnetometer's readings"
+            ),
+            Error::TooManyOutliers {
+                rejected,
+                valid,
+                limit,
+            } => write!(
+                f,
+                "too many outliers: {rejected} of {valid} samples off the fitted ellipsoid (more than {:.0} %): \
+                 a disturbance or a faulty sensor; collect again",
+                limit * 100.0
+            ),
+            Error::SystematicMisfit { lack_of_fit, limit } => write!(
+                f,
+                "the ellipsoid misfits a region of the samples (lack of fit {lack_of_fit:.1}, limit {limit:.1}): \
+                 a disturbance moved part of the trajectory; collect again away from magnets and currents"
+            ),
             Error::Truncated => f.write_str("stored calibration is truncated"),
             Error::BadMagic => f.write_str("stored bytes are not a calibration (bad magic)"),
             Error::UnsupportedVersion { found } => {

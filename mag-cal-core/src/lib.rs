@@ -77,6 +77,7 @@ pub mod collector;
 pub mod ellipsoid;
 mod error;
 pub mod heading;
+mod histogram;
 mod linalg;
 pub mod methods;
 pub mod moments;
@@ -85,7 +86,10 @@ pub mod persist;
 pub mod quality;
 pub mod quasi_newton;
 mod real;
+pub mod robust;
+pub mod rules;
 mod sample;
+pub mod screen;
 #[cfg(test)]
 mod test_rng;
 
@@ -100,8 +104,10 @@ pub use error::Error;
 pub use methods::Method;
 pub use nalgebra;
 pub use normalize::MIN_SAMPLES;
-pub use quality::{Quality, Warning, Warnings};
+use quality::Figures;
+pub use quality::{Quality, Thresholds, Warning, Warnings};
 pub use real::Real;
+pub use rules::{Drops, Rule, SampleClass, Selection};
 pub use sample::{Sample, SampleStore};
 
 /// What to run.
@@ -135,23 +141,47 @@ pub struct Config {
     /// ([`Error::FieldStrengthMismatch`]). It is the only check that catches
     /// a small cap of directions fitted by a too-small sphere.
     pub expected_field_strength: Option<f64>,
+    /// Outlier handling (default `true`): the glitch drop rules, screening,
+    /// the robust LS start and 0/1 weights on every pass (see
+    /// [`robust`](crate#outliers)), and the refusals
+    /// [`Error::TooManyOutliers`] and [`Error::SystematicMisfit`]. `false`
+    /// trusts every finite row: the plain methods of the paper, with the
+    /// same estimates as before outlier handling existed (rows too large
+    /// for the working precision are still dropped, and a fit error above
+    /// the limit still refuses: [`Error::NoSphere`]).
+    pub robust: bool,
+    /// The judging limits (default [`Thresholds::DEFAULT`], the measured
+    /// constants of [`quality`]).
+    pub thresholds: Thresholds,
+}
+
+impl Config {
+    /// The defaults: ADC2 from LS9, outlier handling on, the measured
+    /// thresholds (a `const`, for `..Config::DEFAULT` in constants).
+    pub const DEFAULT: Self = Self {
+        method: Method::Adc2,
+        ls: LsVariant::Ls9,
+        max_iterations: 50,
+        max_passes: 50,
+        pass_tolerance: None,
+        noise_covariance: None,
+        expected_field_strength: None,
+        robust: true,
+        thresholds: Thresholds::DEFAULT,
+    };
 }
 
 impl Default for Config {
     fn default() -> Self {
-        Self {
-            method: Method::Adc2,
-            ls: LsVariant::Ls9,
-            max_iterations: 50,
-            max_passes: 50,
-            pass_tolerance: None,
-            noise_covariance: None,
-            expected_field_strength: None,
-        }
+        Self::DEFAULT
     }
 }
 
 /// How a calibration was obtained, and how well it fits.
+///
+/// Every row of the input is counted once:
+/// `samples_used + samples_dropped + screened + rejected` is the input's
+/// length.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Report<T: Real> {
     /// The method that ran.
@@ -164,16 +194,28 @@ pub struct Report<T: Real> {
     /// per fixed-point step for iterated ADC2, one per cost evaluation for
     /// subMLE (0 for [`Method::Ls`]).
     pub passes: u32,
-    /// Finite samples used.
+    /// Passes over the samples of the outlier handling: screening and the
+    /// robust LS refits (0 when the plain fit was clean).
+    pub robust_passes: u32,
+    /// Rows the final fit used.
     pub samples_used: usize,
-    /// Non-finite samples skipped.
+    /// Rows dropped by the rules, all rules together ([`Report::drops`]).
     pub samples_dropped: usize,
-    /// RMS of `|W (y - b)| - 1` over the samples used.
+    /// Rows dropped by each rule.
+    pub drops: Drops,
+    /// Rows kept by the rules but screened out: too far from the others.
+    pub screened: usize,
+    /// Rows kept and inside the screening, rejected by their residual.
+    pub rejected: usize,
+    /// RMS of `|W (y - b)| - 1` over the rows used.
     pub radial_rms: T,
-    /// The figures behind the degenerate-geometry checks.
+    /// The figures behind the checks.
     pub quality: Quality<T>,
     /// What the caller should know but that did not refuse the fit.
     pub warnings: Warnings,
+    /// Which rows the fit used: classifies any row afterwards
+    /// ([`Selection::classify`]).
+    pub selection: Selection<T>,
 }
 
 /// A calibration and its report.
@@ -189,10 +231,13 @@ pub struct Fit<T: Real> {
 ///
 /// Non-finite samples are skipped and counted. Passes over the data:
 /// validation and normalisation, moments, then (except [`Method::Ls`]) the
-/// method's own passes, and finally one pass for the quality figures. The
-/// degenerate-geometry checks ([`quality`]) refuse planar, ambiguous,
-/// too eccentric or poorly covered data with a specific [`Error`], and
-/// report milder findings as [`Warning`]s.
+/// method's own passes, and finally one pass for the quality figures. On
+/// contaminated data ([`Config::robust`]), screening and robust LS passes
+/// come before the method's (see [the crate docs](crate#outliers)). The
+/// figures are then judged in one place ([`quality`]): planar, shapeless,
+/// outlier-ridden, ambiguous, too eccentric or poorly covered data are
+/// refused with a specific [`Error`], milder findings reported as
+/// [`Warning`]s.
 ///
 /// # Flash
 /// The method and the LS variant are resolved to functions here, in a
@@ -205,13 +250,22 @@ pub struct Fit<T: Real> {
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
     let step: methods::Step<T, S> = match config.method {
         Method::Ls => methods::ls_only,
-        Method::Adc1 => methods::adc1::run,
-        Method::Adc2 => methods::adc2::run,
-        Method::Adc2Iterated => methods::iterated::run,
-        Method::SubMle => methods::submle::run,
+        Method::Adc1 => methods::adc1::step,
+        Method::Adc2 => methods::adc2::step,
+        Method::Adc2Iterated => methods::iterated::step,
+        Method::SubMle => methods::submle::step,
     };
     pipeline(samples, config, ellipsoid::solver(config.ls), step)
 }
+
+/// A plain fit is taken as the robust one when no row's residual exceeds
+/// this many robust standard deviations, in the method's pass and in the
+/// final pass. Beyond it a row cannot be Gaussian noise of that sigma
+/// (probability 6e-7 a row); below it, the 0/1 weights at
+/// [`methods::OUTLIER_CUT`] would leave out rows that move the fit by less
+/// than the noise. Clean data then pay no robust pass
+/// (`docs/benchmarks.md`).
+pub const CLEAN_LIMIT: f64 = 5.0;
 
 /// [`calibrate`] with the LS solve and the method's step resolved.
 fn pipeline<T: Real, S: Sample>(
@@ -220,82 +274,235 @@ fn pipeline<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    let scan = normalize::scan::<T, S>(samples)?;
-    let norm = scan.norm;
-    let mut warnings = Warnings::NONE;
-    if scan.dropped > 0 {
-        warnings.insert(Warning::NonFiniteDropped);
+    let scan = normalize::scan::<T, S>(samples, config.robust)?;
+    if config.robust && (scan.drops.glitches() > 0 || scan.gross()) {
+        return robust_path(samples, config, &scan, ls_solve, step);
     }
-    if scan.used < quality::WARN_SAMPLES {
-        warnings.insert(Warning::FewSamples);
+    match plain_path(samples, config, &scan, ls_solve, step) {
+        Ok((fit, clean)) if clean || !config.robust => Ok(fit),
+        Err(e) if !config.robust => Err(e),
+        _ => robust_path(samples, config, &scan, ls_solve, step),
     }
-    if let Some(c) = config.noise_covariance {
-        // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the f32 path.
-        let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
-        if norm.scale < T::lit(quality::WARN_SPREAD_OVER_NOISE) * var.sqrt() {
-            warnings.insert(Warning::LowSpread);
-        }
-    }
+}
 
+/// What the steps before the method leave for it and for the judging.
+struct Start<T: Real> {
+    norm: normalize::Normalization<T>,
+    ls: ellipsoid::Ellipsoid<T>,
+    weights: methods::Weights<T>,
+    robust_passes: u32,
+    screen: Option<rules::Ball<T>>,
+}
+
+/// The plain pipeline: every row the scan kept, weight 1. Returns the fit
+/// and whether it is clean ([`CLEAN_LIMIT`]).
+fn plain_path<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+) -> Result<(Fit<T>, bool), Error> {
+    let norm = scan.norm;
+    let mut figures = Figures::new(scan, config, false);
     let moments = moments::Moments::accumulate(samples, &norm);
-    let flatness = quality::flatness(&moments, scan.used)?;
-    if !(flatness >= T::lit(quality::REFUSE_FLATNESS)) {
-        return Err(Error::Planar);
-    }
-    if flatness < T::lit(quality::WARN_FLATNESS) {
-        warnings.insert(Warning::NearlyPlanar);
-    }
-    let (ls, quadric_gap) = ls_step(&moments, ls_solve)?;
-    let est = step(samples, &norm, &ls, config)?;
-    for w in est.warnings.iter() {
-        warnings.insert(w);
-    }
+    figures.flatness = Some(quality::flatness(&moments, scan.used)?);
+    let (ls, gap) = match ls_step(&moments, ls_solve) {
+        (Ok(ls), gap) => (ls, gap),
+        // A failed fit of planar data is refused as planar.
+        (Err(e), _) => return Err(judge_failure(&figures, config, e)),
+    };
+    figures.quadric_gap = gap;
+    let start = Start {
+        norm,
+        ls,
+        weights: methods::Weights::PLAIN,
+        robust_passes: 0,
+        screen: None,
+    };
+    let (fit, est_max, final_max) = finish(samples, config, scan, &start, step, figures)?;
+    let sigma = fit.report.quality.fit_error;
+    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+    let clean = est_max.is_none_or(|(m, s)| clean_limit(m, s))
+        && clean_limit(final_max, sigma)
+        && !(figures_misfit(&fit, config));
+    Ok((fit, clean))
+}
+
+/// Whether the fit's lack of fit is beyond the limit (for the methods
+/// judged on it).
+fn figures_misfit<T: Real>(fit: &Fit<T>, config: &Config) -> bool {
+    config.method.fits_radial_residual()
+        && fit.report.quality.lack_of_fit > T::from_single(config.thresholds.refuse_lack_of_fit)
+}
+
+/// The robust pipeline (section 14 of the design document): screening, the
+/// robust LS fit, the method with 0/1 weights.
+fn robust_path<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+) -> Result<Fit<T>, Error> {
+    let mut figures = Figures::new(scan, config, true);
+    let screening = screen::screen(samples, scan, true)?;
+    let gate = rules::Gate {
+        glitches: true,
+        screen: Some(screening.ball),
+    };
+    let crude = robust::crude_moments(samples, &screening, &gate);
+    figures.flatness = Some(quality::flatness(&crude, crude.count())?);
+    let fitted = match robust::robust_ls(samples, &screening, &gate, &crude, ls_solve) {
+        Ok(f) => f,
+        Err(e) => {
+            // No ellipsoid at all: judged by the crude sphere's fit error.
+            figures.fit_error = Some(screening.sphere_error);
+            return Err(judge_failure(&figures, config, e));
+        }
+    };
+    let kept = fitted.moments.count();
+    figures.flatness = Some(quality::flatness(&fitted.moments, kept)?);
+    figures.quadric_gap = quality::quadric_gap(&fitted.moments.scatter()).ok();
+    let start = Start {
+        norm: screening.norm,
+        ls: fitted.ls,
+        weights: methods::Weights {
+            gate,
+            sigma: Some(fitted.sigma),
+        },
+        robust_passes: screening.passes + fitted.passes,
+        screen: Some(screening.ball),
+    };
+    finish(samples, config, scan, &start, step, figures).map(|(fit, _, _)| fit)
+}
+
+/// The method from the start, the final pass, and the judging. Returns the
+/// fit, the method's largest residual and sigma (when it has an
+/// artificial-data pass), and the final pass's largest residual.
+#[allow(clippy::type_complexity)]
+fn finish<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    start: &Start<T>,
+    step: methods::Step<T, S>,
+    mut figures: Figures<T>,
+) -> Result<(Fit<T>, Option<(T, T)>, T), Error> {
+    let norm = &start.norm;
+    let est = match step(samples, norm, &start.ls, config, &start.weights) {
+        Ok(est) => est,
+        Err(e) => return Err(judge_failure(&figures, config, e)),
+    };
+    figures.step_warnings = est.warnings;
     let distortion = quality::distortion(&est.w)?;
-    if !(distortion <= T::lit(quality::REFUSE_DISTORTION)) {
-        return Err(Error::ExtremeDistortion);
+    figures.distortion = Some(distortion);
+    let calibration = Calibration::from_normalised_w(norm, &est.w, &est.centre)?;
+    let limit = est
+        .sigma
+        .filter(|_| start.weights.sigma.is_some())
+        .map(|s| s * T::lit(methods::OUTLIER_CUT));
+    let last = match quality::final_pass(
+        samples,
+        norm,
+        &est.centre,
+        &est.w,
+        est.directions,
+        &start.weights.gate,
+        limit,
+    ) {
+        Ok(last) => last,
+        Err(e) => return Err(judge_failure(&figures, config, e)),
+    };
+    figures.used = Some(last.used);
+    figures.coverage = Some(last.coverage);
+    figures.gram_condition = Some(last.gram_condition);
+    figures.radial_rms = Some(last.radial_rms);
+    figures.fit_error = Some(last.fit_error);
+    figures.lack_of_fit = Some(last.lack_of_fit);
+    figures.field_deviation = config
+        .expected_field_strength
+        .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
+    let warnings = quality::judge(&figures, &config.thresholds)?;
+    let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
+    let quality = Quality {
+        flatness: figures.flatness.unwrap_or(T::zero()),
+        quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
+        distortion,
+        coverage: last.coverage,
+        gram_condition: last.gram_condition,
+        fit_error: last.fit_error,
+        lack_of_fit: last.lack_of_fit,
+        outlier_share: figures.outlier_share().unwrap_or(T::zero()),
+    };
+    let report = Report {
+        method: config.method,
+        ls: config.ls,
+        iterations: est.iterations,
+        passes: est.passes,
+        robust_passes: start.robust_passes,
+        samples_used: last.used,
+        samples_dropped: scan.drops.total(),
+        drops: scan.drops,
+        screened: scan.used.saturating_sub(last.passed),
+        rejected: last.passed.saturating_sub(last.used),
+        radial_rms: last.radial_rms,
+        quality,
+        warnings,
+        selection: Selection {
+            glitch_rules: start.weights.gate.glitches,
+            screen: start.screen.as_ref().map(to_sensor),
+            residual_limit: limit,
+        },
+    };
+    let est_max = est.max_residual.zip(est.sigma);
+    Ok((
+        Fit {
+            calibration,
+            report,
+        },
+        est_max,
+        last.max_residual,
+    ))
+}
+
+/// A step failed with `e`: the figures computed so far may explain why
+/// (planar data, a cloud that is no shell); if they refuse, that refusal is
+/// the answer, else `e`.
+fn judge_failure<T: Real>(figures: &Figures<T>, config: &Config, e: Error) -> Error {
+    match quality::judge(figures, &config.thresholds) {
+        Err(refusal) => refusal,
+        Ok(_) => e,
     }
-    let calibration = Calibration::from_normalised_w(&norm, &est.w, &est.centre)?;
-    let last = quality::final_pass(samples, &norm, &est.centre, &est.w, est.directions)?;
-    if !(quadric_gap >= T::lit(quality::REFUSE_QUADRIC_GAP))
-        && !(last.radial_rms >= T::lit(quality::GAP_NOISE_LIMIT))
-    {
-        return Err(Error::AmbiguousQuadric);
-    }
-    if !(quadric_gap >= T::lit(quality::WARN_QUADRIC_GAP)) {
-        warnings.insert(Warning::WeakQuadric);
-    }
-    if !(last.coverage >= T::lit(quality::REFUSE_COVERAGE)) {
-        return Err(Error::PoorCoverage);
-    }
-    if !(last.gram_condition <= T::lit(quality::WARN_GRAM_CONDITION)) {
-        warnings.insert(Warning::WeakCoverage);
-    }
-    if let Some(expected) = config.expected_field_strength {
-        let deviation = calibration.field_strength() / T::lit(expected) - T::one();
-        if !(deviation.abs() <= T::lit(quality::REFUSE_FIELD_DEVIATION)) {
-            return Err(Error::FieldStrengthMismatch);
+}
+
+impl<T: Real> Figures<T> {
+    fn new(scan: &normalize::Scan<T>, config: &Config, robust: bool) -> Self {
+        let low_spread = config.noise_covariance.is_some_and(|c| {
+            // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the
+            // f32 path.
+            let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
+            scan.norm.scale < T::from_single(config.thresholds.warn_spread_over_noise) * var.sqrt()
+        });
+        Self {
+            valid: scan.used,
+            used: None,
+            drops: scan.drops,
+            robust,
+            judge_lack_of_fit: config.method.fits_radial_residual(),
+            low_spread,
+            flatness: None,
+            quadric_gap: None,
+            distortion: None,
+            coverage: None,
+            gram_condition: None,
+            radial_rms: None,
+            fit_error: None,
+            lack_of_fit: None,
+            field_deviation: None,
+            step_warnings: Warnings::NONE,
         }
     }
-    Ok(Fit {
-        calibration,
-        report: Report {
-            method: config.method,
-            ls: config.ls,
-            iterations: est.iterations,
-            passes: est.passes,
-            samples_used: scan.used,
-            samples_dropped: scan.dropped,
-            radial_rms: last.radial_rms,
-            quality: Quality {
-                flatness,
-                quadric_gap,
-                distortion,
-                coverage: last.coverage,
-                gram_condition: last.gram_condition,
-            },
-            warnings,
-        },
-    })
 }
 
 /// Step 1 on the moments: the LS fit, and the quadric gap of the same
@@ -306,8 +513,8 @@ fn pipeline<T: Real, S: Sample>(
 fn ls_step<T: Real>(
     moments: &moments::Moments<T>,
     solve: ellipsoid::Solve<T>,
-) -> Result<(ellipsoid::Ellipsoid<T>, T), Error> {
+) -> (Result<ellipsoid::Ellipsoid<T>, Error>, Option<T>) {
     let scatter = moments.scatter();
-    let quadric_gap = quality::quadric_gap(&scatter)?;
-    Ok((ellipsoid::fit_with(&scatter, solve)?, quadric_gap))
+    let quadric_gap = quality::quadric_gap(&scatter).ok();
+    (ellipsoid::fit_with(&scatter, solve), quadric_gap)
 }

@@ -7,8 +7,10 @@
 
 use nalgebra::SMatrix;
 
-use crate::normalize::Normalization;
-use crate::sample::{finite, Sample};
+use crate::histogram::LogHistogram;
+use crate::normalize::{Normalization, Projector};
+use crate::rules::{pieces, Gate};
+use crate::sample::Sample;
 use crate::Real;
 
 /// Number of monomials `x^p y^q z^r` with `p + q + r <= 4`.
@@ -89,17 +91,47 @@ impl<T: Real> Moments<T> {
     /// `f32` and `[i16; 3]` samples at opt-level "s", against 134 for one
     /// loop (design document, section 13).
     pub fn accumulate<S: Sample>(samples: &[S], norm: &Normalization<T>) -> Self {
+        Self::accumulate_with(samples, norm, &Gate::PLAIN, None, None).0
+    }
+
+    /// [`Moments::accumulate`] over the rows `gate` passes and, with a
+    /// `cut`, only those whose algebraic residual under the cut's fit is
+    /// within its limit (a weighted LS refit with 0/1 weights). `hist`, when
+    /// given, counts the residuals of every row the gate passes. Returns
+    /// the moments and the rows the gate passed; the count of the rows kept
+    /// is the moment `sums[0]`.
+    pub(crate) fn accumulate_with<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        gate: &Gate<T>,
+        cut: Option<&Cut<T>>,
+        mut hist: Option<&mut LogHistogram>,
+    ) -> (Self, usize) {
         let mut sums = [T::zero(); COUNT];
+        let mut passed = 0;
         let (low, high) = sums.split_at_mut(LOW);
-        for block in samples.chunks(BLOCK) {
-            for (t, v) in low.iter_mut().zip(sum_low(block, norm)) {
+        for (prev, block) in pieces(samples, BLOCK) {
+            let mut mask = [0u32; MASK_WORDS];
+            let (a, n) = sum_low(block, prev, norm, gate, cut, hist.as_deref_mut(), &mut mask);
+            passed += n;
+            for (t, v) in low.iter_mut().zip(a) {
                 *t += v;
             }
-            for (t, v) in high.iter_mut().zip(sum_high(block, norm)) {
+            for (t, v) in high.iter_mut().zip(sum_high(block, norm, &mask)) {
                 *t += v;
             }
         }
-        Self { sums }
+        (Self { sums }, passed)
+    }
+
+    /// Number of samples summed (the moment of degree 0).
+    pub fn count(&self) -> usize {
+        let n = self.sums[0].to_f64();
+        if n >= 0.0 {
+            n as usize
+        } else {
+            0
+        }
     }
 
     /// `sum x^p y^q z^r`.
@@ -124,39 +156,93 @@ impl<T: Real> Moments<T> {
 /// Moments of degrees 0-3: positions `0..LOW` of [`EXPONENTS`].
 const LOW: usize = 20;
 
-/// The finite sample `s`, normalised.
-#[inline(always)]
-fn point<T: Real, S: Sample>(s: &S, norm: &Normalization<T>) -> Option<[T; 3]> {
-    let (c, is) = (&norm.centre, norm.inv_scale);
-    finite::<T, S>(s).map(|[a, b, d]| [(a - c.x) * is, (b - c.y) * is, (d - c.z) * is])
+/// Words of a block's mask of kept rows.
+const MASK_WORDS: usize = BLOCK / 32;
+
+/// A 0/1 weight for a weighted LS refit: a row is kept when its algebraic
+/// residual `e = (|u|^2 - 1) / 2` under the previous fit (`u` its
+/// calibrated vector) is at most `limit` in magnitude. Near the ellipsoid
+/// `e` is the radial error `|u| - 1` to first order, and for the LS9 quadric
+/// `phi9 . v9 - 1 = k (|u|^2 - 1)`: the cut is on the LS's own residual.
+#[derive(Clone, Copy)]
+pub(crate) struct Cut<T: Real> {
+    pub map: Projector<T>,
+    pub limit: T,
 }
 
 // The two block sums are separate functions, not inlined into `accumulate`,
 // so that each loop gets the floating-point registers to itself: inlined,
 // the normalisation constants of one loop spill during the other.
 
-/// The count and the sums of the monomials of degrees 1-3 over the finite
-/// samples of `block`, in [`EXPONENTS`] order.
+/// The count and the sums of the monomials of degrees 1-3 over the rows of
+/// `block` that the gate passes and the cut keeps, in [`EXPONENTS`] order;
+/// marks the kept rows in `mask` and returns the count the gate passed.
 #[inline(never)]
-fn sum_low<T: Real, S: Sample>(block: &[S], norm: &Normalization<T>) -> [T; LOW] {
+fn sum_low<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    norm: &Normalization<T>,
+    gate: &Gate<T>,
+    cut: Option<&Cut<T>>,
+    mut hist: Option<&mut LogHistogram>,
+    mask: &mut [u32; MASK_WORDS],
+) -> ([T; LOW], usize) {
     let mut a = [T::zero(); LOW];
-    // An integer count leaves the floating-point registers to the sums.
+    let (c, is) = (&norm.centre, norm.inv_scale);
+    let half = T::lit(0.5);
+    // Integer counts leave the floating-point registers to the sums.
     let mut count = 0;
-    for [x, y, z] in block.iter().filter_map(|s| point(s, norm)) {
+    let mut passed = 0;
+    let mut last = prev;
+    for (i, s) in block.iter().enumerate() {
+        let row = gate.pass(s, last);
+        last = Some(s);
+        let Some(y) = row else {
+            continue;
+        };
+        passed += 1;
+        if let Some(cut) = cut {
+            let [ux, uy, uz] = cut.map.project(y);
+            let e = (ux * ux + uy * uy + uz * uz - T::one()) * half;
+            if let Some(h) = hist.as_deref_mut() {
+                h.add(e);
+            }
+            if !(e.abs() <= cut.limit) {
+                continue;
+            }
+        }
+        if let Some(w) = mask.get_mut(i / 32) {
+            *w |= 1 << (i % 32);
+        }
         count += 1;
-        add_low(&mut a, x, y, z);
+        add_low(
+            &mut a,
+            (y[0] - c.x) * is,
+            (y[1] - c.y) * is,
+            (y[2] - c.z) * is,
+        );
     }
     a[0] = T::from_count(count);
-    a
+    (a, passed)
 }
 
-/// The sums of the monomials of degree 4 over the finite samples of
-/// `block`, in [`EXPONENTS`] order.
+/// The sums of the monomials of degree 4 over the rows of `block` marked
+/// in `mask`, in [`EXPONENTS`] order.
 #[inline(never)]
-fn sum_high<T: Real, S: Sample>(block: &[S], norm: &Normalization<T>) -> [T; COUNT - LOW] {
+fn sum_high<T: Real, S: Sample>(
+    block: &[S],
+    norm: &Normalization<T>,
+    mask: &[u32; MASK_WORDS],
+) -> [T; COUNT - LOW] {
     let mut a = [T::zero(); COUNT - LOW];
-    for [x, y, z] in block.iter().filter_map(|s| point(s, norm)) {
-        add_high(&mut a, x, y, z);
+    let (c, is) = (&norm.centre, norm.inv_scale);
+    for (words, chunk) in mask.iter().zip(block.chunks(32)) {
+        for (i, s) in chunk.iter().enumerate() {
+            if words & (1 << i) != 0 {
+                let [x, y, z] = s.xyz::<T>();
+                add_high(&mut a, (x - c.x) * is, (y - c.y) * is, (z - c.z) * is);
+            }
+        }
     }
     a
 }

@@ -7,7 +7,9 @@
 
 use nalgebra::Vector3;
 
-use crate::sample::{finite, Sample};
+use crate::linalg::{larger, smaller};
+use crate::rules::{count_drops, Drops, Gate};
+use crate::sample::Sample;
 use crate::{Error, Real};
 
 /// Minimum number of finite samples for any fit: the LS ellipsoid has nine
@@ -47,43 +49,108 @@ impl<T: Real> Normalization<T> {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Scan<T: Real> {
     pub norm: Normalization<T>,
-    /// Finite samples.
+    /// Rows the rules kept.
     pub used: usize,
-    /// Non-finite samples, skipped.
-    pub dropped: usize,
+    /// Rows the rules dropped, by rule.
+    pub drops: Drops,
+    /// Smallest and largest kept value of each axis.
+    pub lo: [T; 3],
+    pub hi: [T; 3],
 }
 
-/// One pass over the samples: counts, validates and normalises.
+/// Extent of the kept samples from their mean, in units of their RMS
+/// spread, beyond which the scan reports gross outliers ([`Scan::gross`]):
+/// on any axis, an ellipsoid's samples reach at most 1.7 spreads from
+/// their mean (axis ratio 4, the largest distortion accepted), a cap or
+/// band of it less; one wild sample among `n` reaches `sqrt(n)` spreads.
+pub(crate) const GROSS_EXTENT: f64 = 3.0;
+
+impl<T: Real> Scan<T> {
+    /// Whether some kept sample lies so far from the others that it cannot
+    /// be on the same ellipsoid ([`GROSS_EXTENT`]): the fit must then
+    /// screen before it normalises.
+    pub(crate) fn gross(&self) -> bool {
+        let c = &self.norm.centre;
+        let limit = self.norm.scale * T::lit(GROSS_EXTENT);
+        [c.x, c.y, c.z]
+            .iter()
+            .zip(self.lo.iter().zip(&self.hi))
+            .any(|(&m, (&lo, &hi))| !(hi - m <= limit && m - lo <= limit))
+    }
+}
+
+/// One pass over the samples: applies the drop rules (the glitch rules
+/// when `glitches` is set, see [`crate::rules`]), counts, validates and
+/// normalises the rows kept.
 ///
-/// Sums are taken on `y - y0`, with `y0` the first finite sample, so the
+/// Sums are taken on `y - y0`, with `y0` the first kept sample, so the
 /// variance `mean|y - y0|^2 - |mean(y - y0)|^2` cancels only when `y0` is
 /// far outside the cloud; that case is detected and the spread recomputed
 /// in a second pass around the now-known mean.
-pub(crate) fn scan<T: Real, S: Sample>(samples: &[S]) -> Result<Scan<T>, Error> {
+pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<Scan<T>, Error> {
     let zero = T::zero();
-    // The first finite sample is the origin; the loop runs over the rest.
-    let mut rest = samples.iter();
-    let origin = rest.by_ref().find_map(finite::<T, S>);
+    let gate = Gate {
+        glitches,
+        screen: None,
+    };
+    // The first kept sample is the origin; the loop runs over the rest.
+    let mut prev = None;
+    let mut origin = None;
+    let mut rest: &[S] = &[];
+    for (i, s) in samples.iter().enumerate() {
+        if let Some(y) = gate.pass(s, prev) {
+            origin = Some(y);
+            rest = samples.get(i + 1..).unwrap_or(&[]);
+            break;
+        }
+        prev = Some(s);
+    }
+    let before_rest = samples
+        .len()
+        .checked_sub(rest.len() + 1)
+        .and_then(|i| samples.get(i));
     let mut sums = Sums {
         used: 0,
         sum: [zero; 3],
         sum_sq: zero,
+        lo: [zero; 3],
+        hi: [zero; 3],
     };
     if let Some(o) = origin {
-        sums = sums_about(rest.as_slice(), o);
+        sums = sums_about(rest, before_rest, o, &gate);
         sums.used += 1;
     }
-    let Sums { used, sum, sum_sq } = sums;
-    let dropped = samples.len() - used;
+    let Sums {
+        used,
+        sum,
+        sum_sq,
+        lo,
+        hi,
+    } = sums;
+    let drops = if used < samples.len() {
+        count_drops::<T, S>(samples, glitches)
+    } else {
+        Drops::default()
+    };
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
+        if drops.overflow * 2 > drops.total() {
+            // Most rows are too large to compute with.
+            return Err(Error::OutOfRange);
+        }
+        if glitches && drops.glitches() > 0 {
+            // Say what the rows are without the glitch rules when that is
+            // a refusal too (all equal rather than "repeated"), else how
+            // few the rules left.
+            scan::<T, S>(samples, false)?;
+        }
         return Err(Error::TooFewSamples {
             found: used,
             required: MIN_SAMPLES,
         });
     };
     // Every difference is zero, or so small that its square underflows
-    // (then the spread is refused below): tell the two apart, rarely.
-    if !(sum_sq > zero) && rest.filter_map(finite::<T, S>).all(|y| y == o) {
+    // (then the spread is refused below): tell the two apart.
+    if !(sum_sq > zero) && lo.iter().chain(&hi).all(|&d| d == zero) {
         return Err(Error::AllSamplesEqual);
     }
     let n = T::from_count(used);
@@ -94,7 +161,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S]) -> Result<Scan<T>, Error> 
     // Catastrophic cancellation: y0 lies far outside the cloud (a wild first
     // sample). Recompute the spread around the mean; this path is rare.
     if !(var > mean_sq * T::lit(1e-2)) {
-        var = spread_about(samples, &centre) / n;
+        var = spread_about(samples, &centre, &gate) / n;
     }
     // Refuse spreads whose squares overflow, or that are so small that their
     // squares approach the subnormal range and lose significant bits.
@@ -112,26 +179,38 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S]) -> Result<Scan<T>, Error> 
             inv_scale: T::one() / scale,
         },
         used,
-        dropped,
+        drops,
+        lo: [lo[0] + o[0], lo[1] + o[1], lo[2] + o[2]],
+        hi: [hi[0] + o[0], hi[1] + o[1], hi[2] + o[2]],
     })
 }
 
-/// Count, `sum (y - o)` and `sum |y - o|^2` over finite samples.
+/// Count, `sum (y - o)`, `sum |y - o|^2` and the box of `y - o` over the
+/// kept samples.
 struct Sums<T> {
     used: usize,
     sum: [T; 3],
     sum_sq: T,
+    lo: [T; 3],
+    hi: [T; 3],
 }
 
-/// [`Sums`] of the finite samples about the origin `o`: the loop of
-/// [`scan`], on scalars and on its own (not inlined), so that nothing of
-/// the caller competes for its registers.
+/// [`Sums`] of the kept samples about the origin `o` (`prev`: the row
+/// before `samples`): the loop of [`scan`], on scalars and on its own (not
+/// inlined), so that nothing of the caller competes for its registers.
 #[inline(never)]
-fn sums_about<T: Real, S: Sample>(samples: &[S], o: [T; 3]) -> Sums<T> {
+fn sums_about<T: Real, S: Sample>(
+    samples: &[S],
+    prev: Option<&S>,
+    o: [T; 3],
+    gate: &Gate<T>,
+) -> Sums<T> {
     let [o0, o1, o2] = o;
     let (mut s0, mut s1, mut s2, mut sq) = (T::zero(), T::zero(), T::zero(), T::zero());
+    let (mut lo0, mut lo1, mut lo2) = (T::zero(), T::zero(), T::zero());
+    let (mut hi0, mut hi1, mut hi2) = (T::zero(), T::zero(), T::zero());
     let mut used = 0;
-    for [y0, y1, y2] in samples.iter().filter_map(finite::<T, S>) {
+    for [y0, y1, y2] in gate.rows(samples, prev) {
         let (d0, d1, d2) = (y0 - o0, y1 - o1, y2 - o2);
         s0 += d0;
         s1 += d1;
@@ -139,20 +218,26 @@ fn sums_about<T: Real, S: Sample>(samples: &[S], o: [T; 3]) -> Sums<T> {
         sq += d0 * d0;
         sq += d1 * d1;
         sq += d2 * d2;
+        lo0 = smaller(lo0, d0);
+        lo1 = smaller(lo1, d1);
+        lo2 = smaller(lo2, d2);
+        hi0 = larger(hi0, d0);
+        hi1 = larger(hi1, d1);
+        hi2 = larger(hi2, d2);
         used += 1;
     }
     Sums {
         used,
         sum: [s0, s1, s2],
         sum_sq: sq,
+        lo: [lo0, lo1, lo2],
+        hi: [hi0, hi1, hi2],
     }
 }
 
-/// `sum |y - c|^2` over the finite samples.
-fn spread_about<T: Real, S: Sample>(samples: &[S], c: &Vector3<T>) -> T {
-    samples
-        .iter()
-        .filter_map(finite::<T, S>)
+/// `sum |y - c|^2` over the kept samples.
+fn spread_about<T: Real, S: Sample>(samples: &[S], c: &Vector3<T>, gate: &Gate<T>) -> T {
+    gate.rows(samples, None)
         .map(|y| {
             let d = [y[0] - c.x, y[1] - c.y, y[2] - c.z];
             d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
@@ -238,8 +323,8 @@ mod tests {
         for (s, p) in samples.iter_mut().zip(pattern.iter().cycle()) {
             *s = *p;
         }
-        let scan = scan::<f64, _>(&samples).unwrap();
-        assert_eq!((scan.used, scan.dropped), (24, 4));
+        let scan = scan::<f64, _>(&samples, true).unwrap();
+        assert_eq!((scan.used, scan.drops.non_finite), (24, 4));
         assert!((scan.norm.centre - Vector3::new(100.0, -50.0, 7.0)).amax() < 1e-12);
         assert!((scan.norm.scale - 1.0).abs() < 1e-12);
     }
@@ -247,12 +332,15 @@ mod tests {
     #[test]
     fn equal_samples_and_underflowing_spreads_are_told_apart() {
         let equal = [[3.0f32, -2.0, 1.0]; 20];
-        assert_eq!(scan::<f32, _>(&equal).unwrap_err(), Error::AllSamplesEqual);
+        assert_eq!(
+            scan::<f32, _>(&equal, false).unwrap_err(),
+            Error::AllSamplesEqual
+        );
         // Differences whose squares underflow to zero: not equal, but out
         // of range.
         let mut tiny = [[0.0f32; 3]; 20];
         tiny[7][1] = 1e-40;
-        assert_eq!(scan::<f32, _>(&tiny).unwrap_err(), Error::OutOfRange);
+        assert_eq!(scan::<f32, _>(&tiny, false).unwrap_err(), Error::OutOfRange);
     }
 
     /// The folded map is `W' ((y - c)/s - b')`.

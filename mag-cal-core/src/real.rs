@@ -16,6 +16,8 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     const EPSILON: Self;
     /// Smallest positive normal number of the type.
     const MIN_POSITIVE: Self;
+    /// Largest finite number of the type.
+    const MAX: Self;
     /// Converts a constant, rounding to the nearest representable value.
     fn lit(x: f64) -> Self;
     /// Widens (or keeps) the value as `f64`, for reporting.
@@ -24,6 +26,9 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     fn from_count(n: usize) -> Self;
     /// Converts an `f32` (exact for both types).
     fn from_single(x: f32) -> Self;
+    /// Rounds to `f32` (the identity for `f32`; out-of-range `f64` values
+    /// become infinite), for histogram bins.
+    fn to_single(self) -> f32;
     /// `1 / sqrt(x)` for a positive normal `x`, to the type's precision.
     ///
     /// `f32`: the classic bit-level initial guess (`to_bits`, safe) refined
@@ -47,6 +52,7 @@ pub trait Real: RealField + Copy + sealed::Sealed {
 impl Real for f32 {
     const EPSILON: Self = f32::EPSILON;
     const MIN_POSITIVE: Self = f32::MIN_POSITIVE;
+    const MAX: Self = f32::MAX;
     #[inline]
     fn lit(x: f64) -> Self {
         x as f32
@@ -62,6 +68,10 @@ impl Real for f32 {
     #[inline]
     fn from_single(x: f32) -> Self {
         x
+    }
+    #[inline]
+    fn to_single(self) -> f32 {
+        self
     }
     #[inline]
     fn rsqrt(self) -> Self {
@@ -89,6 +99,7 @@ impl Real for f32 {
 impl Real for f64 {
     const EPSILON: Self = f64::EPSILON;
     const MIN_POSITIVE: Self = f64::MIN_POSITIVE;
+    const MAX: Self = f64::MAX;
     #[inline]
     fn lit(x: f64) -> Self {
         x
@@ -104,6 +115,10 @@ impl Real for f64 {
     #[inline]
     fn from_single(x: f32) -> Self {
         x as f64
+    }
+    #[inline]
+    fn to_single(self) -> f32 {
+        self as f32
     }
     #[inline]
     fn rsqrt(self) -> Self {

@@ -20,6 +20,16 @@ pub trait Sample: Copy {
     /// claims `true` wrongly feeds non-finite values into the sums, and the fit
     /// then ends in [`crate::Error::OutOfRange`] instead of skipping them.
     const ALWAYS_FINITE: bool = false;
+
+    /// Whether a component sits on a rail of the integer type (`i16`:
+    /// `32767`, `-32767` or `-32768`): the reading saturated, or a bus
+    /// error filled the register. Such rows are dropped before any fit
+    /// (when outlier handling is on, [`crate::Config::robust`]). Defaults to
+    /// `false`: floating-point samples have no rails.
+    #[inline(always)]
+    fn on_rails(&self) -> bool {
+        false
+    }
 }
 
 // The conversions are written out per component: `<[_; 3]>::map` compiles
@@ -48,6 +58,11 @@ impl Sample for [i16; 3] {
         [f(self[0]), f(self[1]), f(self[2])]
     }
     const ALWAYS_FINITE: bool = true;
+    #[inline(always)]
+    fn on_rails(&self) -> bool {
+        let rail = |v: i16| v == i16::MAX || v <= -i16::MAX;
+        rail(self[0]) || rail(self[1]) || rail(self[2])
+    }
 }
 
 impl Sample for [i32; 3] {
@@ -59,16 +74,11 @@ impl Sample for [i32; 3] {
     }
     /// `|v| < 2^31`, far inside the `f32` range.
     const ALWAYS_FINITE: bool = true;
-}
-
-/// Finite components of a sample, or `None` when any is NaN or infinite.
-#[inline(always)]
-pub(crate) fn finite<T: Real, S: Sample>(sample: &S) -> Option<[T; 3]> {
-    let v = sample.xyz::<T>();
-    if S::ALWAYS_FINITE || (v[0].is_finite() && v[1].is_finite() && v[2].is_finite()) {
-        Some(v)
-    } else {
-        None
+    /// `i32::MAX`, `-i32::MAX` or `i32::MIN`.
+    #[inline(always)]
+    fn on_rails(&self) -> bool {
+        let rail = |v: i32| v == i32::MAX || v <= -i32::MAX;
+        rail(self[0]) || rail(self[1]) || rail(self[2])
     }
 }
 

@@ -21,13 +21,14 @@
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector};
 
-use crate::artificial::Stats;
+use crate::artificial::{Pass, Stats};
 use crate::ellipsoid::Ellipsoid;
+use crate::histogram::LogHistogram;
 use crate::linalg::{
     cholesky, cholesky_inverse, from_array, min_max, sym_eigenvalues, sym_inv_sqrt, to_array,
 };
 use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
-use crate::methods::Estimate;
+use crate::methods::{robust_sigma, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
 use crate::quasi_newton::{bfgs, Minimum, Objective};
@@ -130,7 +131,23 @@ pub fn run<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
-    let stats = Stats::accumulate(samples, norm, &ls.centre, &ls.w)?;
+    step(samples, norm, ls, config, &Weights::PLAIN)
+}
+
+/// [`run`] with 0/1 weights on the artificial-data pass (as ADC2's).
+pub(crate) fn step<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+    weights: &Weights<T>,
+) -> Result<Estimate<T>, Error> {
+    let mut hist = LogHistogram::new();
+    let pass = Pass {
+        gate: &weights.gate,
+        limit: weights.limit(),
+    };
+    let (stats, res) = Stats::accumulate_with(samples, norm, &ls.centre, &ls.w, &pass, &mut hist)?;
     let m = weighted_solve(&stats, norm, config)?;
     let th = theta(&m.x);
     let (dt, db) = split(&th);
@@ -142,5 +159,7 @@ pub fn run<T: Real, S: Sample>(
         passes: 1,
         warnings: Warnings::NONE,
         directions: Some(DirectionSums::from(&stats)),
+        sigma: robust_sigma(&hist),
+        max_residual: Some(res.max),
     })
 }

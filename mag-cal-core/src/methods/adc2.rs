@@ -18,10 +18,11 @@
 
 use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
-use crate::artificial::Stats;
+use crate::artificial::{Pass, Stats};
 use crate::ellipsoid::Ellipsoid;
+use crate::histogram::LogHistogram;
 use crate::linalg::{cholesky, cholesky_solve, min_max, sym_eigenvalues, sym_inv_sqrt, to_array};
-use crate::methods::Estimate;
+use crate::methods::{robust_sigma, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
@@ -184,7 +185,24 @@ pub fn run<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
-    let stats = Stats::accumulate(samples, norm, &ls.centre, &ls.w)?;
+    step(samples, norm, ls, config, &Weights::PLAIN)
+}
+
+/// [`run`] with 0/1 weights: the artificial-data pass leaves out the rows
+/// the weights reject.
+pub(crate) fn step<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+    weights: &Weights<T>,
+) -> Result<Estimate<T>, Error> {
+    let mut hist = LogHistogram::new();
+    let pass = Pass {
+        gate: &weights.gate,
+        limit: weights.limit(),
+    };
+    let (stats, res) = Stats::accumulate_with(samples, norm, &ls.centre, &ls.w, &pass, &mut hist)?;
     let sol = solve(&stats, &ls.t, &ls.centre, config.max_iterations)?;
     Ok(Estimate {
         centre: sol.centre,
@@ -193,6 +211,8 @@ pub fn run<T: Real, S: Sample>(
         passes: 1,
         warnings: Warnings::NONE,
         directions: Some(DirectionSums::from(&stats)),
+        sigma: robust_sigma(&hist),
+        max_residual: Some(res.max),
     })
 }
 

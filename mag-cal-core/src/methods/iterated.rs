@@ -20,10 +20,11 @@
 
 use nalgebra::{Matrix3, SVector, Vector3};
 
-use crate::artificial::Stats;
+use crate::artificial::{Pass, Stats};
 use crate::ellipsoid::Ellipsoid;
+use crate::histogram::LogHistogram;
 use crate::linalg::{cholesky, cholesky_inverse, from_array, sym_inv_sqrt, to_array};
-use crate::methods::{adc2, Estimate};
+use crate::methods::{adc2, robust_sigma, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quasi_newton::Anderson;
 use crate::sample::Sample;
@@ -73,17 +74,27 @@ fn unpack<T: Real>(x: &State<T>) -> (Matrix3<T>, Vector3<T>) {
 /// solve is ADC2's closed form: near the fixed point the whole correction
 /// is of the order of BFGS's 1e-6 step test, and a solve stopped there made
 /// the map noisy at 1e-7, which stalled the acceleration.
+///
+/// With weights, the pass leaves out the rows they reject, and returns the
+/// robust sigma and largest residual of its own residuals: the next pass's
+/// weights.
 fn adc2_step<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,
     x: &State<T>,
-) -> Result<State<T>, Error> {
+    weights: &Weights<T>,
+) -> Result<(State<T>, Option<T>, T), Error> {
     let (w, b) = unpack(x);
     let t0 = inverse(&w)?;
-    let stats = Stats::accumulate(samples, norm, &b, &w)?;
+    let mut hist = LogHistogram::new();
+    let pass = Pass {
+        gate: &weights.gate,
+        limit: weights.limit(),
+    };
+    let (stats, res) = Stats::accumulate_with(samples, norm, &b, &w, &pass, &mut hist)?;
     let sol = adc2::solve_closed_form(&stats, &t0, &b)?;
     let w_new = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
-    Ok(pack(&w_new, &sol.centre))
+    Ok((pack(&w_new, &sol.centre), robust_sigma(&hist), res.max))
 }
 
 /// The gauge-free size of a change from `a` to `b`:
@@ -104,6 +115,19 @@ pub fn run<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
+    step(samples, norm, ls, config, &Weights::PLAIN)
+}
+
+/// [`run`] with 0/1 weights. Each pass's weights come from the residuals
+/// of the pass before (the first pass's from `weights`); plain weights
+/// (no sigma) stay plain.
+pub(crate) fn step<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+    weights: &Weights<T>,
+) -> Result<Estimate<T>, Error> {
     let tol = match config.pass_tolerance {
         // A tolerance that can never be met (negative, zero, NaN) would only
         // run to the pass cap: it means the default.
@@ -115,10 +139,17 @@ pub fn run<T: Real, S: Sample>(
     let mut x = pack(&ls.w, &ls.centre);
     let mut passes = 0u32;
     let mut last = x;
+    let mut weights = *weights;
+    let mut max_residual = None;
+    let mut sigma = None;
     while passes < config.max_passes {
-        let g = adc2_step(samples, norm, &x)?;
+        let (g, pass_sigma, pass_max) = adc2_step(samples, norm, &x, &weights)?;
         passes += 1;
         last = g;
+        (sigma, max_residual) = (pass_sigma, Some(pass_max));
+        if weights.sigma.is_some() {
+            weights = weights.with_sigma(pass_sigma);
+        }
         if !(change(&x, &g) >= tol) {
             let (w, centre) = unpack(&g);
             return Ok(Estimate {
@@ -128,6 +159,8 @@ pub fn run<T: Real, S: Sample>(
                 passes,
                 warnings: Warnings::NONE,
                 directions: None,
+                sigma,
+                max_residual,
             });
         }
         let next = accel.step(&x, &g);
@@ -150,6 +183,8 @@ pub fn run<T: Real, S: Sample>(
         passes,
         warnings,
         directions: None,
+        sigma,
+        max_residual,
     })
 }
 

@@ -29,11 +29,12 @@ use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
 use crate::linalg::{cholesky, from_array, sym_sqrt, to_array};
-use crate::methods::Estimate;
+use crate::methods::{Estimate, Weights};
 use crate::moments::BLOCK;
 use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
-use crate::sample::{finite, Sample};
+use crate::rules::{pieces, Gate};
+use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
 
 /// Number of parameters: the upper triangle of `A` (6) and `b'` (3).
@@ -57,12 +58,22 @@ fn pack<T: Real>(a: &Matrix3<T>, b: &Vector3<T>) -> SVector<T, PARAMS> {
 pub struct SubMleObjective<'a, T: Real, S: Sample> {
     samples: &'a [S],
     norm: &'a Normalization<T>,
+    gate: Gate<T>,
 }
 
 impl<'a, T: Real, S: Sample> SubMleObjective<'a, T, S> {
     /// The objective over `samples`.
     pub fn new(samples: &'a [S], norm: &'a Normalization<T>) -> Self {
-        Self { samples, norm }
+        Self::gated(samples, norm, Gate::PLAIN)
+    }
+
+    /// The objective over the rows `gate` passes.
+    pub(crate) fn gated(samples: &'a [S], norm: &'a Normalization<T>, gate: Gate<T>) -> Self {
+        Self {
+            samples,
+            norm,
+            gate,
+        }
     }
 }
 
@@ -74,10 +85,10 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let mut cost = T::zero();
         let mut dm = Matrix3::zeros();
         let mut db = Vector3::zeros();
-        for block in self.samples.chunks(BLOCK) {
+        for (prev, block) in pieces(self.samples, BLOCK) {
             let (mut c_blk, mut dm_blk, mut db_blk) =
                 (T::zero(), Matrix3::zeros(), Vector3::zeros());
-            for y in block.iter().filter_map(finite::<T, S>) {
+            for y in self.gate.rows(block, prev) {
                 let e = self.norm.forward(y) - b;
                 let me = m * e;
                 let z = e.dot(&me) - T::one();
@@ -109,12 +120,26 @@ pub fn run<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     config: &Config,
 ) -> Result<Estimate<T>, Error> {
+    step(samples, norm, ls, config, &Weights::PLAIN)
+}
+
+/// [`run`] over the rows the weights' gate passes (the drop rules and the
+/// screening ball). No residual cut: the weights would change between the
+/// cost evaluations of one BFGS solve, and the cost with them; subMLE
+/// starts from the robust LS fit instead.
+pub(crate) fn step<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    ls: &Ellipsoid<T>,
+    config: &Config,
+    weights: &Weights<T>,
+) -> Result<Estimate<T>, Error> {
     // A0^T A0 = M' with A0 upper triangular: the transposed Cholesky factor.
     // The array factor is L[row][column]; read as nalgebra's column-major
     // storage it is L^T, the upper factor.
     let a0 = from_array(cholesky(&to_array(&ls.m)).ok_or(Error::NotAnEllipsoid)?);
     let x0 = pack(&a0, &ls.centre);
-    let objective = SubMleObjective::new(samples, norm);
+    let objective = SubMleObjective::gated(samples, norm, weights.gate);
     // The paper's stop: a step below 1e-6 of the parameter scale. The
     // gradient test only ends exact fits (noise-free data: J = 0 at the
     // LS start already).
@@ -134,6 +159,8 @@ pub fn run<T: Real, S: Sample>(
         passes: counter.count(),
         warnings: Warnings::NONE,
         directions: None,
+        sigma: None,
+        max_residual: None,
     })
 }
 

@@ -1,0 +1,323 @@
+//! Fixed histograms: medians and other quantiles without sorting, in
+//! bounded memory, one cheap pass each (design document, section 14).
+//!
+//! The samples are a read-only slice and no per-sample value is stored, so
+//! robust scales come from histograms filled during the passes the fit
+//! makes anyway:
+//!
+//! - [`LogHistogram`]: magnitudes on a logarithmic scale, 8 bins per octave
+//!   taken straight from the `f32` exponent and the top three mantissa bits,
+//!   256 bins covering 32 octaves. A quantile is interpolated inside its
+//!   bin (bins are 9 % wide: the interpolated median of a smooth
+//!   distribution is good to about 1 %).
+//! - [`AxisHistograms`]: three linear histograms, one per axis, over a
+//!   window that the caller narrows pass by pass (nested histograms) to find
+//!   a coordinate-wise median.
+//!
+//! Counters are `u16`: when one would overflow, every counter is halved,
+//! which keeps the quantiles (to the rounding of the halving) for inputs of
+//! any length.
+
+use crate::Real;
+
+/// Bins of a [`LogHistogram`].
+const LOG_BINS: usize = 256;
+/// `f32` bit pattern shift that leaves the exponent and three mantissa bits:
+/// 8 bins per octave.
+const LOG_SHIFT: u32 = 20;
+/// The bin index of `2^-24` (the lowest bin edge, relative to the reference
+/// scale): exponent field `127 - 24`, 8 bins per octave.
+const LOG_BASE: u32 = (127 - 24) << 3;
+
+/// A histogram of magnitudes `|x| / scale` on a logarithmic scale, from
+/// `2^-24` to `2^8`; smaller values count in the first bin, larger ones
+/// (and non-finite ones) in the last.
+#[derive(Clone, Debug)]
+pub(crate) struct LogHistogram {
+    bins: [u16; LOG_BINS],
+    /// Sum of the bins (kept through halvings).
+    total: u32,
+}
+
+impl LogHistogram {
+    /// An empty histogram.
+    pub(crate) const fn new() -> Self {
+        Self {
+            bins: [0; LOG_BINS],
+            total: 0,
+        }
+    }
+
+    /// Counts the magnitude `|x|` (already divided by the reference scale).
+    #[inline(always)]
+    pub(crate) fn add<T: Real>(&mut self, x: T) {
+        let bits = x.to_single().abs().to_bits();
+        // NaN and infinity have the largest exponent: the last bin.
+        let k = (bits >> LOG_SHIFT).saturating_sub(LOG_BASE) as usize;
+        let k = if k < LOG_BINS { k } else { LOG_BINS - 1 };
+        self.bump(k);
+    }
+
+    #[inline(always)]
+    fn bump(&mut self, k: usize) {
+        if let Some(c) = self.bins.get_mut(k) {
+            *c += 1;
+            self.total += 1;
+            if *c == u16::MAX {
+                self.halve();
+            }
+        }
+    }
+
+    /// Halves every counter (rare: once per 65 535 counts in one bin).
+    #[inline(never)]
+    fn halve(&mut self) {
+        let mut total = 0u32;
+        for c in self.bins.iter_mut() {
+            *c /= 2;
+            total += u32::from(*c);
+        }
+        self.total = total;
+    }
+
+    /// Number of counts.
+    pub(crate) fn total(&self) -> u32 {
+        self.total
+    }
+
+    /// The value below which the share `p` (in `[0, 1]`) of the counts lie,
+    /// interpolated inside its bin; `None` when the histogram is empty.
+    pub(crate) fn quantile<T: Real>(&self, p: T) -> Option<T> {
+        if self.total == 0 {
+            return None;
+        }
+        let target = p * T::from_count(self.total as usize);
+        let mut below = T::zero();
+        for (k, &c) in self.bins.iter().enumerate() {
+            let c = T::from_count(usize::from(c));
+            if below + c >= target && c > T::zero() {
+                let (lo, hi) = edges::<T>(k);
+                let frac = (target - below) / c;
+                return Some(lo + (hi - lo) * frac);
+            }
+            below += c;
+        }
+        Some(edges::<T>(LOG_BINS - 1).1)
+    }
+}
+
+/// Lower and upper edge of bin `k` of a [`LogHistogram`] (the first bin's
+/// lower edge is 0, the last's upper edge `2^8`).
+fn edges<T: Real>(k: usize) -> (T, T) {
+    let edge = |k: usize| {
+        let bits = ((k as u32).saturating_add(LOG_BASE)) << LOG_SHIFT;
+        T::from_single(f32::from_bits(bits))
+    };
+    let lo = if k == 0 { T::zero() } else { edge(k) };
+    (lo, edge(k + 1))
+}
+
+/// Bins per axis of [`AxisHistograms`].
+pub(crate) const AXIS_BINS: usize = 64;
+
+/// Three linear histograms over a window `[lo, lo + AXIS_BINS * width)` per
+/// axis, with the counts below and above the window.
+#[derive(Clone, Debug)]
+pub(crate) struct AxisHistograms<T: Real> {
+    lo: [T; 3],
+    inv_width: [T; 3],
+    width: [T; 3],
+    bins: [[u16; AXIS_BINS]; 3],
+    below: [u32; 3],
+    above: [u32; 3],
+    /// Counts per axis, the window's included.
+    total: u32,
+}
+
+/// Where a quantile of one axis lies in its window.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Place<T> {
+    /// Inside bin `k` (interpolated value).
+    In(usize, T),
+    /// Below or above the window: the window is wrong.
+    Outside,
+}
+
+impl<T: Real> AxisHistograms<T> {
+    /// Empty histograms over `[lo[a], hi[a]]` per axis (`hi > lo`).
+    pub(crate) fn new(lo: [T; 3], hi: [T; 3]) -> Self {
+        let n = T::from_count(AXIS_BINS);
+        let width = [
+            (hi[0] - lo[0]) / n,
+            (hi[1] - lo[1]) / n,
+            (hi[2] - lo[2]) / n,
+        ];
+        let inv = |w: T| {
+            if w > T::zero() {
+                T::one() / w
+            } else {
+                T::zero()
+            }
+        };
+        Self {
+            lo,
+            inv_width: [inv(width[0]), inv(width[1]), inv(width[2])],
+            width,
+            bins: [[0; AXIS_BINS]; 3],
+            below: [0; 3],
+            above: [0; 3],
+            total: 0,
+        }
+    }
+
+    /// Counts one point.
+    #[inline(always)]
+    pub(crate) fn add(&mut self, y: [T; 3]) {
+        self.total += 1;
+        let mut full = false;
+        let axes = y
+            .iter()
+            .zip(&self.lo)
+            .zip(&self.inv_width)
+            .zip(self.bins.iter_mut())
+            .zip(self.below.iter_mut().zip(self.above.iter_mut()));
+        for ((((&v, &lo), &iw), bins), (below, above)) in axes {
+            let t = (v - lo) * iw;
+            if !(t >= T::zero()) {
+                *below += 1;
+            } else if !(t < T::from_count(AXIS_BINS)) {
+                *above += 1;
+            } else if let Some(c) = bins.get_mut(t.to_single() as usize) {
+                // 0 <= t < AXIS_BINS: the truncation is in range.
+                *c += 1;
+                full |= *c == u16::MAX;
+            }
+        }
+        if full {
+            self.halve();
+        }
+    }
+
+    #[inline(never)]
+    fn halve(&mut self) {
+        let axes = self
+            .bins
+            .iter_mut()
+            .zip(self.below.iter_mut().zip(self.above.iter_mut()));
+        let mut total = 0;
+        for (bins, (below, above)) in axes {
+            for c in bins.iter_mut() {
+                *c /= 2;
+            }
+            *below /= 2;
+            *above /= 2;
+            // Counts per axis as the bins now hold them (equal on every
+            // axis but for rounding: the first's).
+            if total == 0 {
+                total = *below + *above + bins.iter().map(|&c| u32::from(c)).sum::<u32>();
+            }
+        }
+        self.total = total;
+    }
+
+    /// The value of axis `a` below which the share `p` of the counts lie.
+    pub(crate) fn quantile(&self, a: usize, p: T) -> Place<T> {
+        let (Some(bins), Some(&below), Some(&lo), Some(&w)) = (
+            self.bins.get(a),
+            self.below.get(a),
+            self.lo.get(a),
+            self.width.get(a),
+        ) else {
+            return Place::Outside;
+        };
+        let total: u32 = below
+            + self.above.get(a).copied().unwrap_or(0)
+            + bins.iter().map(|&c| u32::from(c)).sum::<u32>();
+        let target = p * T::from_count(total as usize);
+        let mut acc = T::from_count(below as usize);
+        if !(acc < target) && below > 0 {
+            return Place::Outside;
+        }
+        for (k, &c) in bins.iter().enumerate() {
+            let c = T::from_count(usize::from(c));
+            if acc + c >= target && c > T::zero() {
+                let frac = (target - acc) / c;
+                return Place::In(k, lo + w * (T::from_count(k) + frac));
+            }
+            acc += c;
+        }
+        Place::Outside
+    }
+
+    /// The window of bins `first..=last` of axis `a`, as `(lo, hi)`.
+    pub(crate) fn window(&self, a: usize, first: usize, last: usize) -> (T, T) {
+        let lo = self.lo.get(a).copied().unwrap_or(T::zero());
+        let w = self.width.get(a).copied().unwrap_or(T::zero());
+        (
+            lo + w * T::from_count(first),
+            lo + w * T::from_count(last + 1),
+        )
+    }
+
+    /// Bin width of axis `a`.
+    pub(crate) fn width(&self, a: usize) -> T {
+        self.width.get(a).copied().unwrap_or(T::zero())
+    }
+
+    /// Number of points counted.
+    #[cfg(test)]
+    pub(crate) fn total(&self) -> u32 {
+        self.total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_median_of_a_geometric_sequence() {
+        let mut h = LogHistogram::new();
+        // 1001 values, geometric from 1e-3 to 1e1: median 0.1.
+        for i in 0..=1000 {
+            let x = 1e-3f64 * libm::pow(1e4, f64::from(i) / 1000.0);
+            h.add(-x);
+        }
+        let m: f64 = h.quantile(0.5).unwrap();
+        assert!((m / 0.1 - 1.0).abs() < 0.01, "{m}");
+        assert_eq!(h.total(), 1001);
+    }
+
+    #[test]
+    fn log_histogram_survives_long_inputs_and_extremes() {
+        let mut h = LogHistogram::new();
+        for _ in 0..200_000 {
+            h.add(0.5f32);
+        }
+        h.add(f32::NAN);
+        h.add(f32::INFINITY);
+        h.add(0.0f32);
+        let m: f32 = h.quantile(0.5).unwrap();
+        assert!((m / 0.5 - 1.0).abs() < 0.1, "{m}");
+        assert!(h.total() < 70_000);
+        assert_eq!(LogHistogram::new().quantile::<f32>(0.5), None);
+    }
+
+    #[test]
+    fn axis_median_and_outside() {
+        let mut h = AxisHistograms::new([0.0f64; 3], [64.0; 3]);
+        for i in 0..100 {
+            let v = f64::from(i) * 0.5;
+            h.add([v, v + 10.0, 100.0]);
+        }
+        match h.quantile(0, 0.5) {
+            Place::In(k, v) => {
+                assert_eq!(k, 24);
+                assert!((v - 25.0).abs() < 0.6, "{v}");
+            }
+            Place::Outside => panic!("inside"),
+        }
+        assert_eq!(h.quantile(2, 0.5), Place::Outside);
+        assert_eq!(h.total(), 100);
+    }
+}

@@ -1,0 +1,381 @@
+//! Step 0 of the robust pipeline: the rows that are dropped before any
+//! fit, by rule (design document, section 14), and the per-sample gate
+//! every later pass applies.
+//!
+//! A row is dropped when it
+//!
+//! - is not finite (always);
+//! - has a component whose magnitude would overflow the working precision
+//!   in the fit's sums (always; e.g. a `1e308` row, which would otherwise
+//!   make the whole batch [`crate::Error::OutOfRange`]);
+//! - is exactly `(0, 0, 0)`, the value a failed bus read leaves;
+//! - has a component on the integer type's rails ([`Sample::on_rails`]);
+//! - repeats the previous row exactly (a stuck sensor, or a driver that
+//!   returned a stale register).
+//!
+//! The last three only when outlier handling is on
+//! ([`crate::Config::robust`]). No per-sample mask is stored: every pass
+//! re-applies the rules to the read-only samples (a few instructions a
+//! sample), and the repetition rule reads the row before.
+
+use crate::sample::Sample;
+use crate::Real;
+
+/// Rows dropped before the fit, by rule.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Drops {
+    /// Rows with a NaN or infinite component.
+    pub non_finite: usize,
+    /// Rows with a component too large for the working precision's sums.
+    pub overflow: usize,
+    /// Rows that are exactly `(0, 0, 0)`.
+    pub zero: usize,
+    /// Rows with a component on the integer type's rails.
+    pub rails: usize,
+    /// Rows equal to the row before.
+    pub repeated: usize,
+}
+
+impl Drops {
+    /// Rows dropped by every rule together.
+    pub const fn total(&self) -> usize {
+        self.non_finite + self.overflow + self.zero + self.rails + self.repeated
+    }
+
+    /// Rows dropped by the rules that signal glitches (zero, rails,
+    /// repeated), as opposed to values that cannot be computed with.
+    pub const fn glitches(&self) -> usize {
+        self.zero + self.rails + self.repeated
+    }
+
+    fn count(&mut self, rule: Rule) {
+        let c = match rule {
+            Rule::NonFinite => &mut self.non_finite,
+            Rule::Overflow => &mut self.overflow,
+            Rule::Zero => &mut self.zero,
+            Rule::Rails => &mut self.rails,
+            Rule::Repeated => &mut self.repeated,
+        };
+        *c += 1;
+    }
+}
+
+/// The rule that dropped a row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Rule {
+    /// A NaN or infinite component.
+    NonFinite,
+    /// A component too large for the working precision.
+    Overflow,
+    /// Exactly `(0, 0, 0)`.
+    Zero,
+    /// A component on the integer type's rails.
+    Rails,
+    /// Equal to the row before.
+    Repeated,
+}
+
+impl Rule {
+    /// Short snake-case name, as used in the CLI's JSON.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Rule::NonFinite => "non_finite",
+            Rule::Overflow => "overflow",
+            Rule::Zero => "zero",
+            Rule::Rails => "rails",
+            Rule::Repeated => "repeated",
+        }
+    }
+}
+
+/// The largest component magnitude a row may have: `sqrt(MAX) / 2^20`
+/// (`f32`: 1.8e13, `f64`: 1.3e148). Squares of differences of such values,
+/// summed over `2^20` rows, stay finite.
+fn overflow_limit<T: Real>() -> T {
+    T::MAX.sqrt() * T::lit(1.0 / 1_048_576.0)
+}
+
+/// The components of `sample` in precision `T`, or the rule that drops it.
+/// `prev` is the row before it in the slice (`None` for the first);
+/// `glitches` switches the zero, rails and repetition rules on.
+#[inline(always)]
+pub(crate) fn check<T: Real, S: Sample>(
+    sample: &S,
+    prev: Option<&S>,
+    glitches: bool,
+) -> Result<[T; 3], Rule> {
+    let v = sample.xyz::<T>();
+    // The integer types are finite and far below the limit.
+    if !S::ALWAYS_FINITE {
+        if !(v[0].is_finite() && v[1].is_finite() && v[2].is_finite()) {
+            return Err(Rule::NonFinite);
+        }
+        let limit = overflow_limit::<T>();
+        if !(v[0].abs() <= limit && v[1].abs() <= limit && v[2].abs() <= limit) {
+            return Err(Rule::Overflow);
+        }
+    }
+    if glitches {
+        let zero = T::zero();
+        if v[0] == zero && v[1] == zero && v[2] == zero {
+            return Err(Rule::Zero);
+        }
+        if sample.on_rails() {
+            return Err(Rule::Rails);
+        }
+        if let Some(p) = prev {
+            if p.xyz::<T>() == v {
+                return Err(Rule::Repeated);
+            }
+        }
+    }
+    Ok(v)
+}
+
+/// A ball in sensor units: the screening region (samples outside it are
+/// not used by any fit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Ball<T: Real> {
+    pub centre: [T; 3],
+    pub radius_sq: T,
+}
+
+impl<T: Real> Ball<T> {
+    #[inline(always)]
+    pub(crate) fn contains(&self, y: [T; 3]) -> bool {
+        let d = [
+            y[0] - self.centre[0],
+            y[1] - self.centre[1],
+            y[2] - self.centre[2],
+        ];
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self.radius_sq
+    }
+}
+
+/// Which rows a pass uses: the rules, and the screening ball when the
+/// robust path set one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Gate<T: Real> {
+    /// The zero, rails and repetition rules.
+    pub glitches: bool,
+    /// Samples outside are screened out.
+    pub screen: Option<Ball<T>>,
+}
+
+impl<T: Real> Gate<T> {
+    /// Every finite, representable row: the plain pipeline's.
+    pub(crate) const PLAIN: Self = Self {
+        glitches: false,
+        screen: None,
+    };
+
+    /// The components of a row the gate passes.
+    #[inline(always)]
+    pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
+        let y = check::<T, S>(sample, prev, self.glitches).ok()?;
+        match &self.screen {
+            Some(ball) if !ball.contains(y) => None,
+            _ => Some(y),
+        }
+    }
+
+    /// The rows of `block` the gate passes; `prev` is the row before the
+    /// block in the whole slice.
+    #[inline(always)]
+    pub(crate) fn rows<'a, S: Sample>(
+        &'a self,
+        block: &'a [S],
+        prev: Option<&'a S>,
+    ) -> impl Iterator<Item = [T; 3]> + 'a {
+        let mut last = prev;
+        block.iter().filter_map(move |s| {
+            let y = self.pass(s, last);
+            last = Some(s);
+            y
+        })
+    }
+}
+
+/// What a fit did with one row ([`Selection::classify`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SampleClass {
+    /// The final fit used the row.
+    Used,
+    /// A drop rule removed the row before any fit.
+    Dropped(Rule),
+    /// The row lies too far from the others (screening).
+    Screened,
+    /// The row's radial residual under the calibration exceeds the cut.
+    Rejected,
+}
+
+/// Which rows a fit used: enough to classify every row afterwards, e.g.
+/// to mark outliers on a plot or to flag them when applying the
+/// calibration ([`crate::Report::selection`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Selection<T: Real> {
+    /// The zero, rails and repetition rules applied.
+    pub glitch_rules: bool,
+    /// Rows farther than `radius` from `centre` (sensor units) were
+    /// screened out.
+    pub screen: Option<([T; 3], T)>,
+    /// Rows whose radial residual `||u| - 1|` under the calibration exceeds
+    /// this were rejected.
+    pub residual_limit: Option<T>,
+}
+
+impl<T: Real> Selection<T> {
+    /// Every finite, representable row used: the plain pipeline's.
+    pub const ALL: Self = Self {
+        glitch_rules: false,
+        screen: None,
+        residual_limit: None,
+    };
+
+    pub(crate) fn gate(&self) -> Gate<T> {
+        Gate {
+            glitches: self.glitch_rules,
+            screen: self.screen.map(|(centre, r)| Ball {
+                centre,
+                radius_sq: r * r,
+            }),
+        }
+    }
+
+    /// What the fit did with each row of `samples` under `calibration`
+    /// (the fit's own rows and calibration give the fit's own choice, up to
+    /// rounding for a row exactly at the limit).
+    ///
+    /// ```
+    /// use mag_cal_core::{calibrate, Config, SampleClass};
+    /// let mut samples: Vec<[f32; 3]> = (0..300)
+    ///     .map(|i| {
+    ///         let z = 1.0 - 2.0 * (i as f32 + 0.5) / 300.0;
+    ///         let (r, phi) = ((1.0 - z * z).sqrt(), i as f32 * 2.399_963);
+    ///         [40.0 * r * phi.cos() + 5.0, 40.0 * r * phi.sin(), 40.0 * z - 3.0]
+    ///     })
+    ///     .collect();
+    /// samples[100] = [400.0, -250.0, 90.0]; // an I2C glitch
+    /// samples[200] = [0.0, 0.0, 0.0]; // a failed read
+    /// let fit = calibrate::<f32, _>(&samples, &Config::default())?;
+    /// let classes: Vec<_> = fit.report.selection.classify(&fit.calibration, &samples).collect();
+    /// assert_eq!(classes.iter().filter(|c| **c == SampleClass::Used).count(), 298);
+    /// assert_ne!(classes[100], SampleClass::Used);
+    /// # Ok::<(), mag_cal_core::Error>(())
+    /// ```
+    pub fn classify<'a, S: Sample>(
+        &'a self,
+        calibration: &'a crate::Calibration<T>,
+        samples: &'a [S],
+    ) -> impl Iterator<Item = SampleClass> + 'a {
+        let ball = self.gate().screen;
+        let mut prev = None;
+        samples.iter().map(move |s| {
+            let row = check::<T, S>(s, prev, self.glitch_rules);
+            prev = Some(s);
+            let y = match row {
+                Ok(y) => y,
+                Err(rule) => return SampleClass::Dropped(rule),
+            };
+            if ball.is_some_and(|b| !b.contains(y)) {
+                return SampleClass::Screened;
+            }
+            match self.residual_limit {
+                Some(limit) => {
+                    let r = calibration.apply(y).norm() - T::one();
+                    if r.abs() <= limit {
+                        SampleClass::Used
+                    } else {
+                        SampleClass::Rejected
+                    }
+                }
+                None => SampleClass::Used,
+            }
+        })
+    }
+}
+
+/// The slice in pieces of `size`, each with the row before it.
+#[inline(always)]
+pub(crate) fn pieces<S>(samples: &[S], size: usize) -> impl Iterator<Item = (Option<&S>, &[S])> {
+    let mut prev = None;
+    samples.chunks(size.max(1)).map(move |piece| {
+        let p = prev;
+        prev = piece.last();
+        (p, piece)
+    })
+}
+
+/// Counts the drops of every rule over the slice.
+pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Drops {
+    let mut drops = Drops::default();
+    let mut prev = None;
+    for s in samples {
+        if let Err(rule) = check::<T, S>(s, prev, glitches) {
+            drops.count(rule);
+        }
+        prev = Some(s);
+    }
+    drops
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_rule_drops_its_rows() {
+        let rows: [[f64; 3]; 8] = [
+            [1.0, 2.0, 3.0],
+            [1.0, 2.0, 3.0],      // repeated
+            [0.0, 0.0, 0.0],      // zero
+            [f64::NAN, 0.0, 1.0], // non-finite
+            [1e308, 0.0, 1.0],    // overflow
+            [0.0, 0.0, 0.0],      // zero (also a repeat: zero is checked first)
+            [4.0, 5.0, 6.0],
+            [4.0, 5.0, 6.5],
+        ];
+        let d = count_drops::<f64, _>(&rows, true);
+        assert_eq!(
+            d,
+            Drops {
+                non_finite: 1,
+                overflow: 1,
+                zero: 2,
+                rails: 0,
+                repeated: 1
+            }
+        );
+        assert_eq!(d.total(), 5);
+        let plain = count_drops::<f64, _>(&rows, false);
+        assert_eq!((plain.total(), plain.non_finite, plain.overflow), (2, 1, 1));
+        let ints: [[i16; 3]; 4] = [[1, 2, 3], [32767, 0, 1], [5, -32768, 1], [-32767, 4, 4]];
+        assert_eq!(count_drops::<f32, _>(&ints, true).rails, 3);
+    }
+
+    #[test]
+    fn the_gate_reads_the_row_before_across_pieces() {
+        let rows = [
+            [1.0f32, 1.0, 1.0],
+            [2.0, 2.0, 2.0],
+            [2.0, 2.0, 2.0],
+            [3.0, 3.0, 1.0],
+        ];
+        let gate = Gate::<f32> {
+            glitches: true,
+            screen: Some(Ball {
+                centre: [0.0; 3],
+                radius_sq: 12.5,
+            }),
+        };
+        // Piece boundary between the two equal rows: still a repeat; the
+        // last row lies outside the ball.
+        let kept: usize = pieces(&rows, 2)
+            .map(|(prev, piece)| gate.rows(piece, prev).count())
+            .sum();
+        assert_eq!(kept, 2);
+    }
+}

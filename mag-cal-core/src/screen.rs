@@ -1,0 +1,245 @@
+//! Step 1 of the robust pipeline: screening and the crude sphere
+//! (design document, section 14, steps 2 and 4).
+//!
+//! Before any fit sees them, samples far from the cloud are screened out:
+//!
+//! 1. a coordinate-wise median centre `c`, from nested histograms per axis
+//!    ([`AxisHistograms`]): each pass narrows every axis's window to the
+//!    bins holding its middle half, until that half spans at least
+//!    [`RESOLVED_BINS`] bins (2 passes on data without wild values, 3-4
+//!    with values 100 times the field away);
+//! 2. the median distance `m = median |y - c|` (one pass, [`LogHistogram`]);
+//!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
+//! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
+//!    of the samples kept, giving the band around the sphere that holds
+//!    [`CRUDE_SHARE`] of them (the crude LS start fits only those, which
+//!    escapes a displaced patch of the trajectory) and the sphere's own
+//!    robust fit error (the refusal figure when no ellipsoid can be fitted
+//!    at all: a device lying still, a noise ball).
+//!
+//! Every pass is a cheap histogram pass (10-25 instructions a sample on a
+//! Cortex-M4F); nothing is sorted or stored per sample.
+
+use crate::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
+use crate::normalize::{Normalization, Scan};
+use crate::rules::{pieces, Ball, Gate};
+use crate::sample::Sample;
+use crate::{Error, Real};
+
+/// Samples farther from the median centre than this many median distances
+/// are screened out. A sphere's samples lie at most 1 median distance (plus
+/// noise) from its centre, an ellipsoid of axis ratio 4 (the largest
+/// distortion accepted) at most 2.
+pub const SCREEN_RADIUS: f64 = 2.5;
+/// The share of the screened samples, closest to the crude sphere, that
+/// the crude LS start fits.
+pub const CRUDE_SHARE: f64 = 0.7;
+/// The median is resolved when the middle half of an axis spans this many
+/// bins: its bins are then at most a sixteenth of that axis's
+/// inter-quartile range, and the interpolated median is closer still.
+pub const RESOLVED_BINS: usize = 16;
+/// Cap on the nested histogram passes.
+pub const MAX_LEVELS: u32 = 12;
+
+/// `1 / Phi^-1(3/4)`: a standard deviation from the median absolute value
+/// of a normal variable.
+pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// What screening found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Screening<T: Real> {
+    /// The screening ball: median centre, radius [`SCREEN_RADIUS`]` m`.
+    pub ball: Ball<T>,
+    /// The normalisation of the robust path: median centre, scale `m`.
+    pub norm: Normalization<T>,
+    /// Rows the rules kept that lie outside the ball.
+    pub screened: usize,
+    /// Half-width of the band `| |y - c| - m | <= band` that holds
+    /// [`CRUDE_SHARE`] of the screened samples, sensor units.
+    pub band: T,
+    /// Robust fit error of the crude sphere:
+    /// `1.4826 median | |y - c| / m - 1 |` over the screened samples.
+    pub sphere_error: T,
+    /// Passes over the samples.
+    pub passes: u32,
+}
+
+/// Screens the rows the rules keep (`glitches`: see [`crate::rules`]).
+pub(crate) fn screen<T: Real, S: Sample>(
+    samples: &[S],
+    scan: &Scan<T>,
+    glitches: bool,
+) -> Result<Screening<T>, Error> {
+    let gate = Gate {
+        glitches,
+        screen: None,
+    };
+    let (centre, spread, mut passes) = median_centre(samples, scan, &gate);
+    if !(spread > T::zero()) || !spread.is_finite() {
+        return Err(Error::AllSamplesEqual);
+    }
+    // Median distance, on the scale of the spread (the mean inter-quartile
+    // range: a sphere's radius).
+    let inv_spread = T::one() / spread;
+    let mut dist = LogHistogram::new();
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        distances(block, prev, &gate, centre, inv_spread, &mut dist);
+    }
+    passes += 1;
+    let m = dist
+        .quantile(T::lit(0.5))
+        .map(|q| q.sqrt() * spread)
+        .unwrap_or(T::zero());
+    if !(m > T::zero()) || !m.is_finite() {
+        // More than half the rows sit on the median centre.
+        return Err(Error::NoSphere {
+            fit_error: f32::INFINITY,
+            limit: 0.0,
+        });
+    }
+    let ball = Ball {
+        centre,
+        radius_sq: m * m * T::lit(SCREEN_RADIUS * SCREEN_RADIUS),
+    };
+    // The shell: | |y - c| / m - 1 | of the rows inside the ball.
+    let inside = Gate {
+        glitches,
+        screen: Some(ball),
+    };
+    let inv_m = T::one() / m;
+    let mut shell = LogHistogram::new();
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        shell_residuals(block, prev, &inside, centre, inv_m, &mut shell);
+    }
+    passes += 1;
+    let kept = shell.total() as usize;
+    let band = shell.quantile(T::lit(CRUDE_SHARE)).unwrap_or(T::zero()) * m;
+    let sphere_error = shell.quantile(T::lit(0.5)).unwrap_or(T::zero()) * T::lit(MAD_TO_SIGMA);
+    let norm = Normalization {
+        centre: nalgebra::Vector3::new(centre[0], centre[1], centre[2]),
+        scale: m,
+        inv_scale: inv_m,
+    };
+    Ok(Screening {
+        ball,
+        norm,
+        // Halvings in a histogram of more than 65 535 rows can leave its
+        // total a little short: never report a negative count.
+        screened: scan.used.saturating_sub(kept.min(scan.used)),
+        band,
+        sphere_error,
+        passes,
+    })
+}
+
+/// The coordinate-wise median of the rows the gate passes, the mean of the
+/// axes' inter-quartile ranges, and the passes it took.
+fn median_centre<T: Real, S: Sample>(
+    samples: &[S],
+    scan: &Scan<T>,
+    gate: &Gate<T>,
+) -> ([T; 3], T, u32) {
+    let (mut lo, mut hi) = (scan.lo, scan.hi);
+    let mut median = [T::zero(); 3];
+    let mut iqr = [T::zero(); 3];
+    let mut done = [false; 3];
+    let mut passes = 0;
+    while passes < MAX_LEVELS && !done.iter().all(|&d| d) {
+        let mut h = AxisHistograms::new(lo, hi);
+        for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+            fill(block, prev, gate, &mut h);
+        }
+        passes += 1;
+        for a in 0..3 {
+            if done[a] {
+                continue;
+            }
+            if !(h.width(a) > T::zero()) {
+                // One value on this axis.
+                median[a] = lo[a];
+                done[a] = true;
+                continue;
+            }
+            let (q1, q2, q3) = (
+                h.quantile(a, T::lit(0.25)),
+                h.quantile(a, T::lit(0.5)),
+                h.quantile(a, T::lit(0.75)),
+            );
+            let (Place::In(k1, v1), Place::In(_, v2), Place::In(k3, v3)) = (q1, q2, q3) else {
+                // The window lost the middle half (halved counters): keep
+                // the last estimate.
+                done[a] = true;
+                continue;
+            };
+            median[a] = v2;
+            iqr[a] = v3 - v1;
+            if k3 - k1 + 1 >= RESOLVED_BINS || k3 - k1 + 1 >= AXIS_BINS {
+                done[a] = true;
+            } else {
+                (lo[a], hi[a]) = h.window(a, k1, k3);
+            }
+        }
+    }
+    let spread = (iqr[0] + iqr[1] + iqr[2]) / T::lit(3.0);
+    (median, spread, passes)
+}
+
+/// Adds the rows of `block` that the gate passes to the histograms.
+#[inline(never)]
+fn fill<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    gate: &Gate<T>,
+    h: &mut AxisHistograms<T>,
+) {
+    for y in gate.rows(block, prev) {
+        h.add(y);
+    }
+}
+
+/// Counts `|y - c|^2 / spread^2` of the rows of `block` the gate passes.
+#[inline(never)]
+fn distances<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    gate: &Gate<T>,
+    c: [T; 3],
+    inv_spread: T,
+    h: &mut LogHistogram,
+) {
+    for y in gate.rows(block, prev) {
+        let d = [
+            (y[0] - c[0]) * inv_spread,
+            (y[1] - c[1]) * inv_spread,
+            (y[2] - c[2]) * inv_spread,
+        ];
+        h.add(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    }
+}
+
+/// Counts `| |y - c| / m - 1 |` of the rows of `block` the gate passes.
+#[inline(never)]
+fn shell_residuals<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    gate: &Gate<T>,
+    c: [T; 3],
+    inv_m: T,
+    h: &mut LogHistogram,
+) {
+    for y in gate.rows(block, prev) {
+        let d = [
+            (y[0] - c[0]) * inv_m,
+            (y[1] - c[1]) * inv_m,
+            (y[2] - c[2]) * inv_m,
+        ];
+        let q = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        // | |d| - 1 | = | q - 1 | / (|d| + 1): no cancellation near 1.
+        let r = if q >= T::MIN_POSITIVE {
+            (q - T::one()) / (q * q.rsqrt() + T::one())
+        } else {
+            T::one()
+        };
+        h.add(r);
+    }
+}
