@@ -10,13 +10,17 @@
 //! uses N + 1), `--out DIR` (default: the workspace's `docs/`). Progress goes
 //! to stderr, the tables and one PASS/FAIL line per relation to stdout; the
 //! exit status is 1 when a relation fails. Every run has its own fixed seed,
-//! so everything but the timings is reproducible bit for bit.
+//! so everything but the timings is reproducible bit for bit. A section of
+//! `results.md` between `<!-- contamination:start -->` and
+//! `<!-- contamination:end -->` (written by the `contamination-table`
+//! binary) is kept.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
+use host_tests::contamination::keep_section;
 use host_tests::metrics::{mean_std, median, Errors};
 use host_tests::scenarios::{HeadingScenario, SCENARIOS};
 use host_tests::study::{
@@ -203,7 +207,14 @@ fn write_outputs(
 ) -> std::io::Result<()> {
     let figs = out.join("figures");
     std::fs::create_dir_all(&figs)?;
-    std::fs::write(out.join("results.md"), &doc.markdown)?;
+    // Keep the section the `contamination-table` binary wrote, if any.
+    let results = out.join("results.md");
+    let markdown = match std::fs::read_to_string(&results) {
+        Ok(old) => keep_section(&doc.markdown, &old),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => doc.markdown.clone(),
+        Err(e) => return Err(e),
+    };
+    std::fs::write(results, markdown)?;
     std::fs::write(figs.join("table1_es_ratio.svg"), svg_es_ratio(table))?;
     std::fs::write(figs.join("table1_time.svg"), svg_time(table))?;
     std::fs::write(figs.join("table2_window_sweep.svg"), svg_sweep(heading))?;
