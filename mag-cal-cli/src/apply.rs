@@ -11,10 +11,13 @@ use serde_json::Value;
 
 use crate::cli::{ApplyArgs, MAX_WINDOW};
 use crate::error::{one_line, CliError};
-use crate::input::{self, Accel, Source};
+use crate::input::{self, Accel, Picked, Source};
 
 /// Runs `magcal apply`, writing the CSV to `out`.
-pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<(), CliError> {
+///
+/// Returns a note for stderr when the sample columns were found in the
+/// header.
+pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Option<String>, CliError> {
     let cal_source = Source::from_arg(&args.calibration);
     let source = Source::from_arg(&args.file);
     if cal_source == Source::Stdin && source == Source::Stdin {
@@ -70,7 +73,8 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<(), CliError> {
         line.push('\n');
         write(&mut out, &line)?;
     }
-    out.flush().map_err(CliError::Write)
+    out.flush().map_err(CliError::Write)?;
+    Ok((table.columns.picked == Picked::Header).then(|| format!("columns {}", table.columns)))
 }
 
 /// A CSV field: the shortest round-trip form, `nan` for non-finite values.

@@ -17,10 +17,16 @@ use mag_cal_core::{LsVariant, Method};
 const AFTER_HELP: &str = "\
 Input: CSV or whitespace/tab/semicolon separated text, one sample per line,
 '-' for stdin. Lines starting with '#' and blank lines are skipped. The first
-other line is a header when any of its fields is not a number. Without
---columns the first three columns are x, y, z; with --columns X,Y,Z they are
-picked by header name (case-insensitive). 'nan' and 'inf' are accepted and
-skipped by the fit (counted as dropped).
+other line is a header when any of its fields is not a number.
+Columns: --columns X,Y,Z picks x, y, z by header name (case-insensitive).
+Without it, rows of at most three numeric fields give x, y, z from the first
+three fields; wider rows need a header naming exactly one raw magnetometer
+triple, which is then used (and named in the report, or on stderr): magx,
+mag_x, MagX, mag.x, mx, m_x, mag_x_raw, raw_mag_x, magnetometer_x, compass_x,
+HX(uT), x, ... (case, '_', '-', '.', spaces and a trailing unit in brackets
+are ignored; names containing 'cal' are calibrated columns, never picked).
+No such triple, several, or no header: exit 2, listing the header's columns.
+'nan' and 'inf' are accepted and skipped by the fit (counted as dropped).
 
 Exit status: 0 success, 2 usage, I/O or parse error, 3 calibration refused.";
 
@@ -78,7 +84,9 @@ pub struct FitArgs {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
 
-    /// Header names of the x, y, z columns, e.g. magx,magy,magz
+    /// Header names of the x, y, z columns, e.g. magx,magy,magz (default: the
+    /// first three fields, or in wider rows the magnetometer columns the
+    /// header names; see below)
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 
@@ -96,7 +104,8 @@ pub struct FitArgs {
 /// Text after the help of `magcal apply`.
 const APPLY_AFTER_HELP: &str = "\
 CAL.json is what 'magcal fit --format json' prints; only its hard_iron and
-soft_iron are read. FILE is read as by 'magcal fit'.
+soft_iron are read. FILE is read as by 'magcal fit', by the same rule for its
+x, y, z columns (see 'magcal fit --help').
 
 Output: CSV on stdout, header 'x,y,z', then one calibrated sample per input
 row: W (raw - b) on the unit sphere, or with --scaled times the field strength
@@ -128,7 +137,8 @@ pub struct ApplyArgs {
     #[arg(value_name = "FILE")]
     pub file: PathBuf,
 
-    /// Header names of the x, y, z columns, e.g. magx,magy,magz
+    /// Header names of the x, y, z columns, e.g. magx,magy,magz (default: as
+    /// for 'magcal fit')
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 

@@ -29,7 +29,9 @@ pub enum CliError {
         message: String,
     },
     /// The input as a whole does not fit the request (no data rows,
-    /// `--columns` without a header, unknown column name).
+    /// `--columns` without a header, unknown column name, rows of more than
+    /// three numeric fields without `--columns` and without one
+    /// magnetometer triple in the header).
     Input(String),
     /// The report could not be written to stdout.
     Write(io::Error),

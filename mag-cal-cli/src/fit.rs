@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::cli::{FitArgs, Format, NoiseStd, Precision};
 use crate::error::CliError;
-use crate::input::{self, Source};
+use crate::input::{self, Picked, Source};
 use crate::output;
 use crate::svg::{self, PlotTitle};
 
@@ -71,7 +71,10 @@ pub struct Quality {
 }
 
 /// Runs `magcal fit`, writing the report to `out`.
-pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
+///
+/// Returns a note for stderr when the sample columns were found in the
+/// header and the report does not say so (`--format json`).
+pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Option<String>, CliError> {
     let source = Source::from_arg(&args.file);
     let bytes = source.read()?;
     let method = args.method.to_core();
@@ -81,7 +84,8 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
             method.name()
         )));
     }
-    let samples = input::parse(&bytes, args.columns.as_ref(), &source.name())?;
+    let table = input::parse(&bytes, args.columns.as_ref(), &source.name())?;
+    let samples = table.samples;
     let config = Config {
         method,
         ls: args.ls.to_core(),
@@ -104,12 +108,16 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<(), CliError> {
         })?;
     }
     let report = match args.format {
-        Format::Text => output::text(&outcome, &source.name()),
+        Format::Text => output::text(&outcome, &source.name(), &table.columns.to_string()),
         Format::Json => output::json(&outcome),
     };
     out.write_all(report.as_bytes())
         .and_then(|()| out.flush())
-        .map_err(CliError::Write)
+        .map_err(CliError::Write)?;
+    Ok(
+        (args.format == Format::Json && table.columns.picked == Picked::Header)
+            .then(|| format!("columns {}", table.columns)),
+    )
 }
 
 impl Outcome {

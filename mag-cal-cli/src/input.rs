@@ -10,14 +10,30 @@
 //!   one, else `,`, else runs of spaces and tabs. Fields are trimmed and may
 //!   be wrapped in double quotes;
 //! - that first line is a header when any of its fields is not a number;
-//! - without `--columns` the first three fields of each row are x, y, z and
-//!   later fields are ignored; with `--columns` the named header fields are
-//!   used (case-insensitive), and only they have to be numbers;
-//! - for `apply`, accelerometer columns are read the same way, named by
-//!   `--accel-columns` or found in the header ([`ACCEL_NAMES`]);
+//! - with `--columns` the named header fields are x, y, z (case-insensitive),
+//!   and only they have to be numbers;
+//! - without `--columns`, the number of numeric fields in the first data
+//!   row decides:
+//!   - at most three: the first three fields of each row are x, y, z and
+//!     later fields are ignored;
+//!   - more than three: the header must name exactly one triple of raw
+//!     magnetometer columns ([`mag_axis`]: `magx`, `mag_x`, `MagX`, `mx`,
+//!     `m_x`, `mag.x`, `mag_x_raw`, `raw_mag_x`, `magnetometer_x`,
+//!     `compass_x`, `HX(uT)`, bare `x`, ...; never a name containing `cal`),
+//!     and those are x, y, z. None, several, or no header at all is an
+//!     error (exit 2) that lists the header's columns and asks for
+//!     `--columns X,Y,Z`: taking the first three of many columns silently
+//!     calibrated the wrong ones (the accelerometer, in `imu_gnss_1252.csv`);
+//! - [`Table::columns`] says which of these rules picked the columns;
+//! - for `apply`, accelerometer columns are named by `--accel-columns` or
+//!   found in the header by their exact names ([`ACCEL_NAMES`]);
 //! - `nan`, `inf`, `-inf` and overflowing literals such as `1e400` are read
-//!   as non-finite numbers, which the core skips and counts as dropped.
+//!   as non-finite numbers, which the core skips and counts as dropped;
+//!   finite but absurd values such as `1e308` are passed to the core as
+//!   they are (what to do with them is the core's decision, not the
+//!   parser's).
 
+use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -139,15 +155,16 @@ fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
         })
 }
 
-/// Parses input bytes into `[x, y, z]` samples (see the module docs).
+/// Parses input bytes into `[x, y, z]` samples (see the module docs), and
+/// says which columns they came from.
 ///
 /// `source_name` is only used in messages.
 pub fn parse(
     bytes: &[u8],
     columns: Option<&Columns>,
     source_name: &str,
-) -> Result<Vec<[f64; 3]>, CliError> {
-    parse_with_accel(bytes, columns, Accel::None, source_name).map(|table| table.samples)
+) -> Result<Table, CliError> {
+    parse_with_accel(bytes, columns, Accel::None, source_name)
 }
 
 /// Which accelerometer columns to read beside the samples.
@@ -180,6 +197,49 @@ pub struct Table {
     pub samples: Vec<[f64; 3]>,
     /// `[ax, ay, az]` per row, when accelerometer columns were found.
     pub accel: Option<Vec<[f64; 3]>>,
+    /// Where the samples came from.
+    pub columns: ColumnsUsed,
+}
+
+/// The columns the samples were read from, and the rule that chose them.
+///
+/// [`Display`](fmt::Display) gives one line for a report, e.g.
+/// `magx,magy,magz (from the header)`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ColumnsUsed {
+    /// The header's names of the x, y, z columns, when there is a header.
+    pub names: Option<[String; 3]>,
+    /// The rule.
+    pub picked: Picked,
+}
+
+/// How the sample columns were chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Picked {
+    /// The first three fields: the first data row has at most three numeric
+    /// fields.
+    FirstThree,
+    /// Named by `--columns`.
+    Named,
+    /// Found by name in the header ([`mag_axis`]), without `--columns`.
+    Header,
+}
+
+impl fmt::Display for ColumnsUsed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let how = match self.picked {
+            Picked::FirstThree => "the first three fields",
+            Picked::Named => "--columns",
+            Picked::Header => "from the header",
+        };
+        match &self.names {
+            Some(names) => {
+                let names: Vec<String> = names.iter().map(|n| excerpt(n)).collect();
+                write!(f, "{} ({how})", names.join(","))
+            }
+            None => f.write_str(how),
+        }
+    }
 }
 
 /// Parses input bytes into samples and, as `accel` asks, accelerometer
@@ -192,7 +252,7 @@ pub fn parse_with_accel(
 ) -> Result<Table, CliError> {
     let text = String::from_utf8_lossy(bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let mut lines = content_lines(text);
+    let mut lines = content_lines(text).peekable();
     let Some((first_no, first)) = lines.next() else {
         return Err(CliError::Input(format!("{source_name}: no data rows")));
     };
@@ -207,9 +267,21 @@ pub fn parse_with_accel(
         ))
     };
 
-    let indices = match (columns, header) {
-        (None, _) => [0, 1, 2],
-        (Some(Columns(names)), Some(header)) => named_indices(header, names, source_name)?,
+    let (indices, picked) = match (columns, header) {
+        (None, _) => {
+            let first_row = if has_header {
+                lines.peek().map(|&(_, line)| separator.fields(line))
+            } else {
+                Some(first_fields.clone())
+            };
+            let numeric = first_row.map_or(0, |fields| {
+                fields.iter().filter(|f| number(f).is_some()).count()
+            });
+            default_indices(header, numeric, source_name)?
+        }
+        (Some(Columns(names)), Some(header)) => {
+            (named_indices(header, names, source_name)?, Picked::Named)
+        }
         (Some(_), None) => return Err(needs_header("--columns")),
     };
     let accel_indices = match (accel, header) {
@@ -222,6 +294,12 @@ pub fn parse_with_accel(
             .iter()
             .find_map(|names| named_indices(header, names, source_name).ok())
             .filter(|found| *found != indices),
+    };
+    let columns = ColumnsUsed {
+        names: header
+            .filter(|header| indices.iter().all(|&i| i < header.len()))
+            .map(|header| indices.map(|i| header[i].to_owned())),
+        picked,
     };
 
     let data_first = (!has_header).then_some((first_no, first));
@@ -242,7 +320,177 @@ pub fn parse_with_accel(
     Ok(Table {
         samples,
         accel: accel_rows,
+        columns,
     })
+}
+
+/// The sample columns without `--columns`, when the first data row has
+/// `numeric` numeric fields: the first three fields when there are at most
+/// three, else the one raw magnetometer triple the header names (see the
+/// module docs); none, several, or no header is an error.
+fn default_indices(
+    header: Option<&[&str]>,
+    numeric: usize,
+    source_name: &str,
+) -> Result<([usize; 3], Picked), CliError> {
+    if numeric <= 3 {
+        return Ok(([0, 1, 2], Picked::FirstThree));
+    }
+    let Some(header) = header else {
+        return Err(CliError::Input(format!(
+            "{source_name}: {numeric} numeric columns and no header line to choose \
+             the magnetometer's x, y, z from; add a header naming the columns and \
+             pass --columns X,Y,Z, or keep only the three magnetometer columns"
+        )));
+    };
+    let triples = mag_triples(header);
+    match triples.as_slice() {
+        [triple] => match triple.as_slice() {
+            &[x, y, z] => Ok(([x, y, z], Picked::Header)),
+            // One name triple with a repeated axis (`magx` and `mag_x`).
+            _ => Err(CliError::Input(format!(
+                "{source_name}: {numeric} numeric columns and the header repeats a \
+                 magnetometer axis ({}); pass --columns X,Y,Z (columns: {})",
+                column_list(header, triple),
+                column_list(header, &all(header)),
+            ))),
+        },
+        [] => Err(CliError::Input(format!(
+            "{source_name}: {numeric} numeric columns and no raw magnetometer \
+             x, y, z columns recognised in the header; pass --columns X,Y,Z \
+             (columns: {})",
+            column_list(header, &all(header)),
+        ))),
+        several => {
+            let listed: Vec<String> = several
+                .iter()
+                .map(|triple| format!("({})", column_list(header, triple)))
+                .collect();
+            Err(CliError::Input(format!(
+                "{source_name}: {numeric} numeric columns and {} sets of magnetometer \
+                 columns in the header: {}; pass --columns X,Y,Z (columns: {})",
+                several.len(),
+                listed.join(", "),
+                column_list(header, &all(header)),
+            )))
+        }
+    }
+}
+
+/// Every index of `header`.
+fn all(header: &[&str]) -> Vec<usize> {
+    (0..header.len()).collect()
+}
+
+/// Stems of raw magnetometer column names, after lower-casing and dropping
+/// `_`, `-`, `.` and spaces; an optional `raw` may stand before or after
+/// stem and axis (`raw_mag_x`, `mag_x_raw`). The empty stem (bare `x`,
+/// `y`, `z`) is accepted without `raw` only.
+///
+/// `h` is the magnetic field's symbol; WitMotion's IMU software exports its
+/// magnetometer as `HX(uT)`, `HY(uT)`, `HZ(uT)` (beside `AccX(g)`,
+/// `AsX(°/s)`, `AngleX(°)`, none of which match), and Arduino loggers for
+/// it and the BMX160 write `hx(uT)`. Stems such as `b` (also a bias) or
+/// `acc`, `gyro`, `pos` are left out on purpose: a name this list does not
+/// know is never guessed.
+const MAG_STEMS: [&str; 8] = [
+    "mag",
+    "m",
+    "magnetometer",
+    "magnetic",
+    "magneticfield",
+    "compass",
+    "h",
+    "",
+];
+
+/// `name` as a raw magnetometer column: its group (the compact name with
+/// the axis letter replaced by `?`: `mag?`, `rawmag?`, `mag?raw`) and its
+/// axis (0, 1, 2 for x, y, z); `None` for any other name.
+///
+/// Case and the separators `_`, `-`, `.` and spaces are ignored, and so is
+/// a trailing unit in brackets (`HX(uT)`, `mag_x [uT]`). A name containing
+/// `cal` (`mag_x_cal`, `cal_mag_x`, `magx_calibrated`) is a calibrated
+/// column, never a raw one.
+pub fn mag_axis(name: &str) -> Option<(String, usize)> {
+    let lower = name.to_lowercase();
+    if lower.contains("cal") {
+        return None;
+    }
+    let compact: String = without_unit(&lower)
+        .chars()
+        .filter(|c| !matches!(c, '_' | '-' | '.' | ' '))
+        .collect();
+    let (prefix, rest, suffix) = if let Some(rest) = compact.strip_prefix("raw") {
+        ("raw", rest, "")
+    } else if let Some(rest) = compact.strip_suffix("raw") {
+        ("", rest, "raw")
+    } else {
+        ("", compact.as_str(), "")
+    };
+    let axis = match rest.chars().last()? {
+        'x' => 0,
+        'y' => 1,
+        'z' => 2,
+        _ => return None,
+    };
+    let stem = &rest[..rest.len() - 1];
+    let raw = !prefix.is_empty() || !suffix.is_empty();
+    (MAG_STEMS.contains(&stem) && !(raw && stem.is_empty()))
+        .then(|| (format!("{prefix}{stem}?{suffix}"), axis))
+}
+
+/// `name` without one trailing bracketed unit: `hx (ut)` is `hx`.
+fn without_unit(name: &str) -> &str {
+    let trimmed = name.trim_end();
+    let open = match trimmed.chars().last() {
+        Some(')') => '(',
+        Some(']') => '[',
+        _ => return trimmed,
+    };
+    trimmed
+        .rfind(open)
+        .map_or(trimmed, |i| trimmed[..i].trim_end())
+}
+
+/// The header's raw magnetometer name triples, in header order: per group
+/// of [`mag_axis`] that has all three axes, the indices of its columns, x
+/// first, then y, then z (more than three when an axis is repeated).
+fn mag_triples(header: &[&str]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<(String, [Vec<usize>; 3])> = Vec::new();
+    for (index, name) in header.iter().enumerate() {
+        let Some((group, axis)) = mag_axis(name) else {
+            continue;
+        };
+        let slot = match groups.iter().position(|(g, _)| *g == group) {
+            Some(slot) => slot,
+            None => {
+                groups.push((group, Default::default()));
+                groups.len() - 1
+            }
+        };
+        groups[slot].1[axis].push(index);
+    }
+    groups
+        .into_iter()
+        .filter(|(_, axes)| axes.iter().all(|a| !a.is_empty()))
+        .map(|(_, axes)| axes.concat())
+        .collect()
+}
+
+/// The header's names at `indices`, for a one-line message: each one
+/// escaped and shortened, at most 40 names.
+fn column_list(header: &[&str], indices: &[usize]) -> String {
+    const MAX: usize = 40;
+    let mut names: Vec<String> = indices
+        .iter()
+        .take(MAX)
+        .map(|&i| excerpt(header.get(i).copied().unwrap_or("")))
+        .collect();
+    if indices.len() > MAX {
+        names.push(format!("... {} more", indices.len() - MAX));
+    }
+    names.join(", ")
 }
 
 /// The positions of `names` in `header` (case-insensitive).
@@ -261,7 +509,7 @@ fn named_indices<S: AsRef<str>>(
                 CliError::Input(format!(
                     "{source_name}: no column named '{}' in the header (columns: {})",
                     excerpt(name),
-                    excerpt(&header.join(", "))
+                    column_list(header, &all(header))
                 ))
             })?;
     }
@@ -312,7 +560,7 @@ mod tests {
     use super::*;
 
     fn parse_ok(text: &str) -> Vec<[f64; 3]> {
-        parse(text.as_bytes(), None, "t").expect("parses")
+        parse(text.as_bytes(), None, "t").expect("parses").samples
     }
 
     fn cols(x: &str, y: &str, z: &str) -> Columns {
@@ -337,17 +585,245 @@ mod tests {
     }
 
     #[test]
-    fn extra_columns_are_ignored_without_columns() {
-        assert_eq!(
-            parse_ok("1 2 3 4\n4 5 6 7"),
-            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
-        );
+    fn three_numeric_columns_are_the_first_three_fields() {
         // Any non-number makes the first line a header, even beyond the
         // first three fields; later rows may hold text there.
+        let t = parse(b"1 2 3 text\n4 5 6 more\n7 8 9 x", None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(t.columns.picked, Picked::FirstThree);
+        assert_eq!(t.columns.to_string(), "1,2,3 (the first three fields)");
+        // A header of any names, with or without a fourth text column.
+        for text in ["a,b,c\n1,2,3\n", "a,b,c,note\n1,2,3,fine\n"] {
+            let t = parse(text.as_bytes(), None, "t").expect("parses");
+            assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]], "{text}");
+            assert_eq!(t.columns.picked, Picked::FirstThree);
+        }
+        let t = parse(b"1,2,3\n", None, "t").expect("parses");
+        assert_eq!(t.columns.to_string(), "the first three fields");
+        assert_eq!(t.columns.names, None);
+    }
+
+    #[test]
+    fn the_usual_magnetometer_names_are_recognised() {
+        for (name, group, axis) in [
+            ("mag_x", "mag?", 0),
+            ("magx", "mag?", 0),
+            ("MagY", "mag?", 1),
+            ("mag.z", "mag?", 2),
+            ("Mag-X", "mag?", 0),
+            ("mag x", "mag?", 0),
+            ("mx", "m?", 0),
+            ("m_y", "m?", 1),
+            ("MZ", "m?", 2),
+            ("mag_x_raw", "mag?raw", 0),
+            ("raw_mag_y", "rawmag?", 1),
+            ("RawMagZ", "rawmag?", 2),
+            ("magnetometer_x", "magnetometer?", 0),
+            ("Magnetic field y (µT)", "magneticfield?", 1),
+            ("compass_z", "compass?", 2),
+            ("HX(uT)", "h?", 0),
+            ("hy", "h?", 1),
+            ("mag_z [uT]", "mag?", 2),
+            ("x", "?", 0),
+            ("Z", "?", 2),
+        ] {
+            assert_eq!(mag_axis(name), Some((group.to_owned(), axis)), "{name}");
+        }
+        for name in [
+            // Calibrated, not raw.
+            "mag_x_cal",
+            "cal_mag_x",
+            "magx_calibrated",
+            "MagXCal",
+            "mag_x (cal)",
+            // Other sensors and other quantities.
+            "accx",
+            "acc_x",
+            "ax",
+            "gyro_x",
+            "gx",
+            "AsX(°/s)",
+            "AngleX(°)",
+            "pos_x",
+            "bx",
+            "roll",
+            "magnitude",
+            // `raw` needs a magnetometer stem; no axis; empty.
+            "raw_x",
+            "x_raw",
+            "mag",
+            "mag_w",
+            "",
+            "(uT)",
+        ] {
+            assert_eq!(mag_axis(name), None, "{name}");
+        }
+    }
+
+    #[test]
+    fn wide_rows_use_the_magnetometer_columns_of_the_header() {
+        for header in [
+            "t,magx,magy,magz",
+            "t,mag_x,mag_y,mag_z",
+            "t,MagX,MagY,MagZ",
+            "t,mag.x,mag.y,mag.z",
+            "t,mx,my,mz",
+            "t,m_x,m_y,m_z",
+            "t,mag_x_raw,mag_y_raw,mag_z_raw",
+            "t,raw_mag_x,raw_mag_y,raw_mag_z",
+            "t,magnetometer_x,magnetometer_y,magnetometer_z",
+            "t,compass_x,compass_y,compass_z",
+            "t,HX(uT),HY(uT),HZ(uT)",
+            "t,x,y,z",
+        ] {
+            let text = format!("{header},accx,accy,accz\n0,1,2,3,4,5,6\n1,7,8,9,0,0,1\n");
+            let t = parse(text.as_bytes(), None, "t").expect(header);
+            assert_eq!(
+                t.samples,
+                vec![[1.0, 2.0, 3.0], [7.0, 8.0, 9.0]],
+                "{header}"
+            );
+            assert_eq!(t.columns.picked, Picked::Header, "{header}");
+            let names: Vec<&str> = header.split(',').skip(1).collect();
+            assert_eq!(
+                t.columns.to_string(),
+                format!("{} (from the header)", names.join(",")),
+            );
+        }
+        // Any column order; the semicolon and whitespace separators too.
+        let t = parse(b"magz;t;magx;q;magy\n3;0;1;9;2\n", None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        let t = parse(b"t ax ay az mx my mz\n0 0 0 9.8 1 2 3\n", None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        // Text fields do not count as numeric columns, and may be anywhere.
+        let t = parse(b"fix,t,mx,my,mz\nNoFix,0,1,2,3\n", None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+    }
+
+    #[test]
+    fn calibrated_columns_are_never_picked() {
+        for header in [
+            "mag_x_cal,mag_y_cal,mag_z_cal,magx,magy,magz",
+            "cal_mag_x,cal_mag_y,cal_mag_z,magx,magy,magz",
+            "magx_calibrated,magy_calibrated,magz_calibrated,magx,magy,magz",
+        ] {
+            let text = format!("{header}\n9,9,9,1,2,3\n");
+            let t = parse(text.as_bytes(), None, "t").expect(header);
+            assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]], "{header}");
+        }
+        // Only calibrated magnetometer columns: nothing to pick.
+        let err = parse(
+            b"accx,accy,accz,mag_x_cal,mag_y_cal,mag_z_cal\n0,0,9.8,1,2,3\n",
+            None,
+            "f.csv",
+        )
+        .unwrap_err();
         assert_eq!(
-            parse_ok("1 2 3 text\n4 5 6 more\n7 8 9 x"),
-            vec![[4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+            err.to_string(),
+            "f.csv: 6 numeric columns and no raw magnetometer x, y, z columns recognised \
+             in the header; pass --columns X,Y,Z (columns: accx, accy, accz, mag_x_cal, \
+             mag_y_cal, mag_z_cal)"
         );
+        assert_eq!(err.exit_code(), 2);
+    }
+
+    #[test]
+    fn wide_rows_without_one_header_triple_are_refused() {
+        // No triple: none known, or one axis missing.
+        for (text, columns) in [
+            ("a,b,c,d\n1,2,3,4\n", "a, b, c, d"),
+            ("t,magx,magy,q\n0,1,2,3\n", "t, magx, magy, q"),
+        ] {
+            let err = parse(text.as_bytes(), None, "f.csv").unwrap_err();
+            let msg = err.to_string();
+            assert!(
+                msg.contains("no raw magnetometer x, y, z columns")
+                    && msg.contains("pass --columns X,Y,Z")
+                    && msg.ends_with(&format!("(columns: {columns})")),
+                "{msg}"
+            );
+            assert_eq!(err.exit_code(), 2);
+        }
+        // Two triples.
+        let err = parse(
+            b"mag_x,mag_y,mag_z,raw_mag_x,raw_mag_y,raw_mag_z\n1,2,3,4,5,6\n",
+            None,
+            "f.csv",
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.csv: 6 numeric columns and 2 sets of magnetometer columns in the header: \
+             (mag_x, mag_y, mag_z), (raw_mag_x, raw_mag_y, raw_mag_z); pass --columns \
+             X,Y,Z (columns: mag_x, mag_y, mag_z, raw_mag_x, raw_mag_y, raw_mag_z)"
+        );
+        let err = parse(b"x,y,z,mx,my,mz\n1,2,3,4,5,6\n", None, "f").unwrap_err();
+        assert!(err.to_string().contains("2 sets"), "{err}");
+        // One axis twice (the separators are ignored: the same name).
+        let err = parse(b"magx,mag_x,magy,magz\n1,2,3,4\n", None, "f.csv").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.csv: 4 numeric columns and the header repeats a magnetometer axis \
+             (magx, mag_x, magy, magz); pass --columns X,Y,Z (columns: magx, mag_x, \
+             magy, magz)"
+        );
+        assert_eq!(err.exit_code(), 2);
+    }
+
+    #[test]
+    fn wide_rows_without_a_header_are_refused() {
+        for text in [
+            "1,2,3,4\n5,6,7,8\n",
+            "1 2 3 4 5 6\n",
+            "# x y z t\n1;2;3;4\n",
+        ] {
+            let err = parse(text.as_bytes(), None, "f.csv").unwrap_err();
+            let msg = err.to_string();
+            assert!(
+                msg.starts_with("f.csv: ")
+                    && msg.contains("numeric columns and no header line")
+                    && msg.contains("--columns X,Y,Z"),
+                "{text}: {msg}"
+            );
+            assert_eq!(err.exit_code(), 2);
+        }
+    }
+
+    #[test]
+    fn columns_option_wins_over_the_header() {
+        let c = cols("mag_x_cal", "mag_y_cal", "mag_z_cal");
+        let text = b"magx,magy,magz,mag_x_cal,mag_y_cal,mag_z_cal\n1,2,3,4,5,6\n";
+        let t = parse(text, Some(&c), "t").expect("parses");
+        assert_eq!(t.samples, vec![[4.0, 5.0, 6.0]]);
+        assert_eq!(t.columns.picked, Picked::Named);
+        assert_eq!(
+            t.columns.to_string(),
+            "mag_x_cal,mag_y_cal,mag_z_cal (--columns)"
+        );
+        // An ambiguous or unknown header is no obstacle to --columns.
+        let c = cols("raw_mag_x", "raw_mag_y", "raw_mag_z");
+        let text = b"mag_x,mag_y,mag_z,raw_mag_x,raw_mag_y,raw_mag_z\n1,2,3,4,5,6\n";
+        let t = parse(text, Some(&c), "t").expect("parses");
+        assert_eq!(t.samples, vec![[4.0, 5.0, 6.0]]);
+        let t = parse(b"a,b,c,d\n1,2,3,4\n", Some(&cols("b", "c", "d")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[2.0, 3.0, 4.0]]);
+    }
+
+    #[test]
+    fn long_headers_are_listed_in_one_bounded_line() {
+        let names: Vec<String> = (0..50).map(|i| format!("c{i}")).collect();
+        let text = format!("{}\n{}\n", names.join(","), vec!["1"; 50].join(","));
+        let msg = parse(text.as_bytes(), None, "t").unwrap_err().to_string();
+        assert!(
+            msg.contains("c0, c1, ") && msg.contains("c39, ... 10 more)"),
+            "{msg}"
+        );
+        assert!(!msg.contains("c40"), "{msg}");
+        // Control characters in a name stay escaped.
+        let msg = parse(b"a\x1b,b,c,d\n1,2,3,4\n", None, "t")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("(columns: a\\u{1b}, b, c, d)"), "{msg}");
     }
 
     #[test]
@@ -359,14 +835,26 @@ mod tests {
     }
 
     #[test]
+    fn absurd_finite_values_pass_through() {
+        // Finite in f64, absurd for a magnetometer: the core's to judge.
+        let s = parse_ok("1,2,3\n1e308,0,0\n-1.7976931348623157e308,5e-324,-0\n4,5,6\n");
+        assert_eq!(s.len(), 4);
+        assert_eq!(s[1], [1e308, 0.0, 0.0]);
+        assert_eq!(s[2], [f64::MIN, 5e-324, 0.0]);
+        assert!(s.iter().flatten().all(|v| v.is_finite()));
+    }
+
+    #[test]
     fn named_columns() {
         let text = "t,MagX,magy,magz,fix\n0,1,2,3,NoFix\n1,4,5,6,3D\n";
         let c = cols("magx", "magy", "MAGZ");
         let s = parse(text.as_bytes(), Some(&c), "t").expect("parses");
-        assert_eq!(s, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(s.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        // The header's spelling, not the option's.
+        assert_eq!(s.columns.to_string(), "MagX,magy,magz (--columns)");
         let c = cols("magz", "magx", "magy");
         let s = parse(text.as_bytes(), Some(&c), "t").expect("parses");
-        assert_eq!(s[0], [3.0, 1.0, 2.0]);
+        assert_eq!(s.samples[0], [3.0, 1.0, 2.0]);
     }
 
     #[test]

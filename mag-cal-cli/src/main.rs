@@ -16,7 +16,10 @@
 //!
 //! Exit codes: 0 success, 2 usage, I/O or parse error, 3 calibration refused
 //! by the core. Every failure prints one line on stderr naming the reason
-//! (clap's usage errors start with such a line and add a usage hint).
+//! (clap's usage errors start with such a line and add a usage hint). A
+//! success prints nothing on stderr, except one `magcal: note: columns ...`
+//! line when the sample columns were found in the header and the output
+//! does not say so (`fit --format json`, `apply`).
 
 mod apply;
 mod cli;
@@ -45,7 +48,13 @@ fn main() -> ExitCode {
         }
     };
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(note) => {
+            // After the output, so that a failure stays one line on stderr.
+            if let Some(note) = note {
+                let _ = writeln!(std::io::stderr(), "magcal: note: {note}");
+            }
+            ExitCode::SUCCESS
+        }
         Err(err) => {
             let _ = writeln!(std::io::stderr(), "magcal: {err}");
             exit_code(err.exit_code())
@@ -53,8 +62,9 @@ fn main() -> ExitCode {
     }
 }
 
-/// Dispatches a parsed command line to its subcommand.
-fn run(cli: Cli) -> Result<(), CliError> {
+/// Dispatches a parsed command line to its subcommand; returns its note
+/// for stderr, if any.
+fn run(cli: Cli) -> Result<Option<String>, CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(&args, &mut std::io::stdout().lock()),
         Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),

@@ -20,11 +20,13 @@ pub fn json(outcome: &Outcome) -> String {
     }
 }
 
-/// The text report for `source_name`.
-pub fn text(o: &Outcome, source_name: &str) -> String {
+/// The text report for `source_name`, whose samples came from `columns`
+/// (one line, e.g. `magx,magy,magz (from the header)`).
+pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
     let mut s = String::new();
     // Writing into a String cannot fail; the results are ignored.
     let _ = writeln!(s, "magcal fit: {source_name}");
+    let _ = writeln!(s, "  columns       {columns}");
     let _ = writeln!(
         s,
         "  method        {} (LS step {}), precision {}",
@@ -218,8 +220,11 @@ mod tests {
 
     #[test]
     fn text_names_the_parameters() {
-        let t = text(&outcome(), "f.csv");
-        assert!(t.contains("magcal fit: f.csv"));
+        let t = text(&outcome(), "f.csv", "magx,magy,magz (from the header)");
+        assert!(
+            t.starts_with("magcal fit: f.csv\n  columns       magx,magy,magz (from the header)\n"),
+            "{t}"
+        );
         assert!(
             t.contains(
                 "hard iron b (sensor units)\n  [     -156.7000      -52.7900        0.3000 ]\n"
@@ -236,7 +241,7 @@ mod tests {
         assert!(t.contains("  warnings      pass_cap\n"), "{t}");
         let mut quiet = outcome();
         quiet.quality.warnings.clear();
-        assert!(text(&quiet, "f").contains("  warnings      none\n"));
+        assert!(text(&quiet, "f", "c").contains("  warnings      none\n"));
         assert!(json(&quiet).contains(r#""warnings":[]"#));
     }
 }
