@@ -320,19 +320,21 @@ fn plain_path<T: Real, S: Sample>(
         robust_passes: 0,
         screen: None,
     };
-    let (fit, est_max, final_max) = finish(samples, config, scan, &start, step, figures)?;
+    let done = finish(samples, config, scan, &start, step, figures)?;
+    let fit = done.fit;
     let sigma = fit.report.quality.fit_error;
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
-    let clean = est_max.is_none_or(|(m, s)| clean_limit(m, s))
-        && clean_limit(final_max, sigma)
-        && !(figures_misfit(&fit, config));
+    let clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
+        && clean_limit(done.final_max, sigma)
+        && !figures_misfit(&fit, done.misfit_significant, config);
     Ok((fit, clean))
 }
 
 /// Whether the fit's lack of fit is beyond the limit (for the methods
 /// judged on it).
-fn figures_misfit<T: Real>(fit: &Fit<T>, config: &Config) -> bool {
+fn figures_misfit<T: Real>(fit: &Fit<T>, significant: bool, config: &Config) -> bool {
     config.method.fits_radial_residual()
+        && significant
         && fit.report.quality.lack_of_fit > T::from_single(config.thresholds.refuse_lack_of_fit)
 }
 
@@ -346,9 +348,9 @@ fn robust_path<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let mut figures = Figures::new(scan, config, true);
-    let screening = screen::screen(samples, scan, true)?;
+    let screening = screen::screen(samples, scan)?;
     let gate = rules::Gate {
-        glitches: true,
+        rules: scan.rules,
         screen: Some(screening.ball),
     };
     let crude = robust::crude_moments(samples, &screening, &gate);
@@ -374,13 +376,21 @@ fn robust_path<T: Real, S: Sample>(
         robust_passes: screening.passes + fitted.passes,
         screen: Some(screening.ball),
     };
-    finish(samples, config, scan, &start, step, figures).map(|(fit, _, _)| fit)
+    finish(samples, config, scan, &start, step, figures).map(|done| done.fit)
 }
 
-/// The method from the start, the final pass, and the judging. Returns the
-/// fit, the method's largest residual and sigma (when it has an
-/// artificial-data pass), and the final pass's largest residual.
-#[allow(clippy::type_complexity)]
+/// A fit and what decides whether the plain one is clean.
+struct Finished<T: Real> {
+    fit: Fit<T>,
+    /// The method's largest residual and its sigma, when it has an
+    /// artificial-data pass.
+    method_max: Option<(T, T)>,
+    /// The final pass's largest residual.
+    final_max: T,
+    misfit_significant: bool,
+}
+
+/// The method from the start, the final pass, and the judging.
 fn finish<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
@@ -388,7 +398,7 @@ fn finish<T: Real, S: Sample>(
     start: &Start<T>,
     step: methods::Step<T, S>,
     mut figures: Figures<T>,
-) -> Result<(Fit<T>, Option<(T, T)>, T), Error> {
+) -> Result<Finished<T>, Error> {
     let norm = &start.norm;
     let est = match step(samples, norm, &start.ls, config, &start.weights) {
         Ok(est) => est,
@@ -420,6 +430,7 @@ fn finish<T: Real, S: Sample>(
     figures.radial_rms = Some(last.radial_rms);
     figures.fit_error = Some(last.fit_error);
     figures.lack_of_fit = Some(last.lack_of_fit);
+    figures.misfit_significant = last.misfit_significant;
     figures.field_deviation = config
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
@@ -450,20 +461,26 @@ fn finish<T: Real, S: Sample>(
         quality,
         warnings,
         selection: Selection {
-            glitch_rules: start.weights.gate.glitches,
+            glitch_rules: start.weights.gate.rules.glitches,
+            clip_levels: start
+                .weights
+                .gate
+                .rules
+                .clip
+                .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
             screen: start.screen.as_ref().map(to_sensor),
             residual_limit: limit,
         },
     };
-    let est_max = est.max_residual.zip(est.sigma);
-    Ok((
-        Fit {
+    Ok(Finished {
+        fit: Fit {
             calibration,
             report,
         },
-        est_max,
-        last.max_residual,
-    ))
+        method_max: est.max_residual.zip(est.sigma),
+        final_max: last.max_residual,
+        misfit_significant: last.misfit_significant,
+    })
 }
 
 /// A step failed with `e`: the figures computed so far may explain why
@@ -499,6 +516,7 @@ impl<T: Real> Figures<T> {
             radial_rms: None,
             fit_error: None,
             lack_of_fit: None,
+            misfit_significant: false,
             field_deviation: None,
             step_warnings: Warnings::NONE,
         }

@@ -7,8 +7,7 @@
 
 use nalgebra::Vector3;
 
-use crate::linalg::{larger, smaller};
-use crate::rules::{count_drops, Drops, Gate};
+use crate::rules::{count_drops, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
@@ -53,6 +52,8 @@ pub(crate) struct Scan<T: Real> {
     pub used: usize,
     /// Rows the rules dropped, by rule.
     pub drops: Drops,
+    /// The rules, with the clip levels found.
+    pub rules: Rules<T>,
     /// Smallest and largest kept value of each axis.
     pub lo: [T; 3],
     pub hi: [T; 3],
@@ -89,8 +90,12 @@ impl<T: Real> Scan<T> {
 /// in a second pass around the now-known mean.
 pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<Scan<T>, Error> {
     let zero = T::zero();
-    let gate = Gate {
-        glitches,
+    let mut gate = Gate {
+        rules: if glitches {
+            Rules::GLITCHES
+        } else {
+            Rules::PLAIN
+        },
         screen: None,
     };
     // The first kept sample is the origin; the loop runs over the rest.
@@ -115,23 +120,33 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         sum_sq: zero,
         lo: [zero; 3],
         hi: [zero; 3],
+        at_lo: [0; 3],
+        at_hi: [0; 3],
     };
     if let Some(o) = origin {
         sums = sums_about(rest, before_rest, o, &gate);
         sums.used += 1;
     }
+    if glitches {
+        gate.rules.clip = clip_levels(&sums, sums.used);
+    }
+    let clipping = gate.rules.clip != Rules::<T>::PLAIN.clip;
     let Sums {
-        used,
+        mut used,
         sum,
         sum_sq,
         lo,
         hi,
+        ..
     } = sums;
-    let drops = if used < samples.len() {
-        count_drops::<T, S>(samples, glitches)
+    let drops = if used < samples.len() || clipping {
+        count_drops::<T, S>(samples, &gate.rules)
     } else {
         Drops::default()
     };
+    // The sums include the clipped rows: the robust path, which clipping
+    // selects, normalises on its own screening.
+    used -= drops.clipped.min(used);
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
         if drops.overflow * 2 > drops.total() {
             // Most rows are too large to compute with.
@@ -150,10 +165,10 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     };
     // Every difference is zero, or so small that its square underflows
     // (then the spread is refused below): tell the two apart.
-    if !(sum_sq > zero) && lo.iter().chain(&hi).all(|&d| d == zero) {
+    if !(sum_sq > zero) && lo == hi {
         return Err(Error::AllSamplesEqual);
     }
-    let n = T::from_count(used);
+    let n = T::from_count(sums.used);
     let mean = Vector3::new(sum[0] / n, sum[1] / n, sum[2] / n);
     let centre = Vector3::new(o[0], o[1], o[2]) + mean;
     let mean_sq = sum_sq / n;
@@ -161,7 +176,15 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     // Catastrophic cancellation: y0 lies far outside the cloud (a wild first
     // sample). Recompute the spread around the mean; this path is rare.
     if !(var > mean_sq * T::lit(1e-2)) {
-        var = spread_about(samples, &centre, &gate) / n;
+        // Over the rows the sums saw (the clipped ones included).
+        let unclipped = Gate {
+            rules: Rules {
+                clip: Rules::<T>::PLAIN.clip,
+                ..gate.rules
+            },
+            screen: None,
+        };
+        var = spread_about(samples, &centre, &unclipped) / n;
     }
     // Refuse spreads whose squares overflow, or that are so small that their
     // squares approach the subnormal range and lose significant bits.
@@ -180,23 +203,45 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         },
         used,
         drops,
-        lo: [lo[0] + o[0], lo[1] + o[1], lo[2] + o[2]],
-        hi: [hi[0] + o[0], hi[1] + o[1], hi[2] + o[2]],
+        rules: gate.rules,
+        lo,
+        hi,
     })
 }
 
-/// Count, `sum (y - o)`, `sum |y - o|^2` and the box of `y - o` over the
-/// kept samples.
+/// Count, `sum (y - o)`, `sum |y - o|^2`, and per axis the smallest and
+/// largest kept value with the number of rows at each, over the kept
+/// samples.
 struct Sums<T> {
     used: usize,
     sum: [T; 3],
     sum_sq: T,
     lo: [T; 3],
     hi: [T; 3],
+    at_lo: [usize; 3],
+    at_hi: [usize; 3],
+}
+
+/// Tracks the extreme of one axis and the rows that share it.
+#[inline(always)]
+fn extremes<T: Real>(v: T, lo: &mut T, at_lo: &mut usize, hi: &mut T, at_hi: &mut usize) {
+    if v > *hi {
+        *hi = v;
+        *at_hi = 1;
+    } else if v == *hi {
+        *at_hi += 1;
+    }
+    if v < *lo {
+        *lo = v;
+        *at_lo = 1;
+    } else if v == *lo {
+        *at_lo += 1;
+    }
 }
 
 /// [`Sums`] of the kept samples about the origin `o` (`prev`: the row
-/// before `samples`): the loop of [`scan`], on scalars and on its own (not
+/// before `samples`; the origin itself counts as a kept row at the
+/// extremes): the loop of [`scan`], on scalars and on its own (not
 /// inlined), so that nothing of the caller competes for its registers.
 #[inline(never)]
 fn sums_about<T: Real, S: Sample>(
@@ -207,8 +252,8 @@ fn sums_about<T: Real, S: Sample>(
 ) -> Sums<T> {
     let [o0, o1, o2] = o;
     let (mut s0, mut s1, mut s2, mut sq) = (T::zero(), T::zero(), T::zero(), T::zero());
-    let (mut lo0, mut lo1, mut lo2) = (T::zero(), T::zero(), T::zero());
-    let (mut hi0, mut hi1, mut hi2) = (T::zero(), T::zero(), T::zero());
+    let ([mut lo0, mut lo1, mut lo2], [mut hi0, mut hi1, mut hi2]) = (o, o);
+    let ([mut nl0, mut nl1, mut nl2], [mut nh0, mut nh1, mut nh2]) = ([1usize; 3], [1usize; 3]);
     let mut used = 0;
     for [y0, y1, y2] in gate.rows(samples, prev) {
         let (d0, d1, d2) = (y0 - o0, y1 - o1, y2 - o2);
@@ -218,12 +263,9 @@ fn sums_about<T: Real, S: Sample>(
         sq += d0 * d0;
         sq += d1 * d1;
         sq += d2 * d2;
-        lo0 = smaller(lo0, d0);
-        lo1 = smaller(lo1, d1);
-        lo2 = smaller(lo2, d2);
-        hi0 = larger(hi0, d0);
-        hi1 = larger(hi1, d1);
-        hi2 = larger(hi2, d2);
+        extremes(y0, &mut lo0, &mut nl0, &mut hi0, &mut nh0);
+        extremes(y1, &mut lo1, &mut nl1, &mut hi1, &mut nh1);
+        extremes(y2, &mut lo2, &mut nl2, &mut hi2, &mut nh2);
         used += 1;
     }
     Sums {
@@ -232,7 +274,35 @@ fn sums_about<T: Real, S: Sample>(
         sum_sq: sq,
         lo: [lo0, lo1, lo2],
         hi: [hi0, hi1, hi2],
+        at_lo: [nl0, nl1, nl2],
+        at_hi: [nh0, nh1, nh2],
     }
+}
+
+/// The clip levels of [`Rules`]: an axis's extreme value that at least
+/// [`CLIP_SHARE`] of the `used` rows (and [`CLIP_MIN_ROWS`]) share, but not
+/// most of them: an axis that hardly varies (planar data) is no clipping.
+fn clip_levels<T: Real>(s: &Sums<T>, used: usize) -> [[T; 2]; 3] {
+    let many = ((used as f64 * CLIP_SHARE) as usize).max(CLIP_MIN_ROWS);
+    let level = |v: T, n: usize| {
+        if n >= many && n <= used / 2 {
+            v
+        } else {
+            T::MAX
+        }
+    };
+    let mut out = [[T::MAX; 2]; 3];
+    for (o, ((&lo, &hi), (&nl, &nh))) in out
+        .iter_mut()
+        .zip(s.lo.iter().zip(&s.hi).zip(s.at_lo.iter().zip(&s.at_hi)))
+    {
+        *o = if lo < hi {
+            [level(lo, nl), level(hi, nh)]
+        } else {
+            [T::MAX; 2]
+        };
+    }
+    out
 }
 
 /// `sum |y - c|^2` over the kept samples.

@@ -32,7 +32,7 @@ use crate::screen::Screening;
 use crate::{Error, Real};
 
 /// Cap on the weighted LS refits after the crude start.
-pub const REFITS: u32 = 3;
+pub const REFITS: u32 = 8;
 
 /// The robust LS fit and what the method's passes need from it.
 #[derive(Clone, Copy, Debug)]

@@ -11,9 +11,13 @@
 //! - is exactly `(0, 0, 0)`, the value a failed bus read leaves;
 //! - has a component on the integer type's rails ([`Sample::on_rails`]);
 //! - repeats the previous row exactly (a stuck sensor, or a driver that
-//!   returned a stale register).
+//!   returned a stale register);
+//! - has a component at a clip level: the largest or smallest value of an
+//!   axis when at least [`CLIP_SHARE`] of the rows share it exactly (an
+//!   axis that saturated below the type's rails; noise makes an axis's
+//!   extreme a value few rows share).
 //!
-//! The last three only when outlier handling is on
+//! The last four only when outlier handling is on
 //! ([`crate::Config::robust`]). No per-sample mask is stored: every pass
 //! re-applies the rules to the read-only samples (a few instructions a
 //! sample), and the repetition rule reads the row before.
@@ -35,18 +39,22 @@ pub struct Drops {
     pub rails: usize,
     /// Rows equal to the row before.
     pub repeated: usize,
+    /// Rows with a component at a clip level: an axis's extreme value that
+    /// many rows share ([`CLIP_SHARE`]), where a saturated axis stops.
+    pub clipped: usize,
 }
 
 impl Drops {
     /// Rows dropped by every rule together.
     pub const fn total(&self) -> usize {
-        self.non_finite + self.overflow + self.zero + self.rails + self.repeated
+        self.non_finite + self.overflow + self.zero + self.rails + self.repeated + self.clipped
     }
 
     /// Rows dropped by the rules that signal glitches (zero, rails,
-    /// repeated), as opposed to values that cannot be computed with.
+    /// repeated, clipped), as opposed to values that cannot be computed
+    /// with.
     pub const fn glitches(&self) -> usize {
-        self.zero + self.rails + self.repeated
+        self.zero + self.rails + self.repeated + self.clipped
     }
 
     fn count(&mut self, rule: Rule) {
@@ -56,6 +64,7 @@ impl Drops {
             Rule::Zero => &mut self.zero,
             Rule::Rails => &mut self.rails,
             Rule::Repeated => &mut self.repeated,
+            Rule::Clipped => &mut self.clipped,
         };
         *c += 1;
     }
@@ -75,6 +84,8 @@ pub enum Rule {
     Rails,
     /// Equal to the row before.
     Repeated,
+    /// A component at a clip level.
+    Clipped,
 }
 
 impl Rule {
@@ -86,6 +97,7 @@ impl Rule {
             Rule::Zero => "zero",
             Rule::Rails => "rails",
             Rule::Repeated => "repeated",
+            Rule::Clipped => "clipped",
         }
     }
 }
@@ -97,14 +109,52 @@ fn overflow_limit<T: Real>() -> T {
     T::MAX.sqrt() * T::lit(1.0 / 1_048_576.0)
 }
 
+/// Rows sharing an axis's extreme value are a clip level when they are at
+/// least this share of the rows (and at least [`CLIP_MIN_ROWS`]). One
+/// sixty-fourth: on a clean integer recording the extreme of an axis is
+/// shared by a few rows at most (a 50-count field, 1000 rows: about 5).
+pub const CLIP_SHARE: f64 = 1.0 / 64.0;
+/// See [`CLIP_SHARE`].
+pub const CLIP_MIN_ROWS: usize = 5;
+
+/// The glitch rules, as one pass applies them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Rules<T: Real> {
+    /// The zero, rails, repetition and clip rules.
+    pub glitches: bool,
+    /// Per axis the low and high clip level; `MAX` in magnitude (which no
+    /// kept value reaches) when the axis has none.
+    pub clip: [[T; 2]; 3],
+}
+
+impl<T: Real> Rules<T> {
+    /// Only the non-finite and overflow rules.
+    pub(crate) const PLAIN: Self = Self {
+        glitches: false,
+        clip: [[T::MAX; 2]; 3],
+    };
+
+    /// The glitch rules, without clip levels.
+    pub(crate) const GLITCHES: Self = Self {
+        glitches: true,
+        clip: [[T::MAX; 2]; 3],
+    };
+
+    #[inline(always)]
+    fn clipped(&self, v: &[T; 3]) -> bool {
+        v.iter()
+            .zip(&self.clip)
+            .any(|(&x, &[lo, hi])| x == lo || x == hi)
+    }
+}
+
 /// The components of `sample` in precision `T`, or the rule that drops it.
-/// `prev` is the row before it in the slice (`None` for the first);
-/// `glitches` switches the zero, rails and repetition rules on.
+/// `prev` is the row before it in the slice (`None` for the first).
 #[inline(always)]
 pub(crate) fn check<T: Real, S: Sample>(
     sample: &S,
     prev: Option<&S>,
-    glitches: bool,
+    rules: &Rules<T>,
 ) -> Result<[T; 3], Rule> {
     let v = sample.xyz::<T>();
     // The integer types are finite and far below the limit.
@@ -117,7 +167,7 @@ pub(crate) fn check<T: Real, S: Sample>(
             return Err(Rule::Overflow);
         }
     }
-    if glitches {
+    if rules.glitches {
         let zero = T::zero();
         if v[0] == zero && v[1] == zero && v[2] == zero {
             return Err(Rule::Zero);
@@ -129,6 +179,9 @@ pub(crate) fn check<T: Real, S: Sample>(
             if p.xyz::<T>() == v {
                 return Err(Rule::Repeated);
             }
+        }
+        if rules.clipped(&v) {
+            return Err(Rule::Clipped);
         }
     }
     Ok(v)
@@ -158,8 +211,8 @@ impl<T: Real> Ball<T> {
 /// robust path set one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Gate<T: Real> {
-    /// The zero, rails and repetition rules.
-    pub glitches: bool,
+    /// The drop rules.
+    pub rules: Rules<T>,
     /// Samples outside are screened out.
     pub screen: Option<Ball<T>>,
 }
@@ -167,14 +220,14 @@ pub(crate) struct Gate<T: Real> {
 impl<T: Real> Gate<T> {
     /// Every finite, representable row: the plain pipeline's.
     pub(crate) const PLAIN: Self = Self {
-        glitches: false,
+        rules: Rules::PLAIN,
         screen: None,
     };
 
     /// The components of a row the gate passes.
     #[inline(always)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
-        let y = check::<T, S>(sample, prev, self.glitches).ok()?;
+        let y = check::<T, S>(sample, prev, &self.rules).ok()?;
         match &self.screen {
             Some(ball) if !ball.contains(y) => None,
             _ => Some(y),
@@ -217,8 +270,11 @@ pub enum SampleClass {
 /// calibration ([`crate::Report::selection`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Selection<T: Real> {
-    /// The zero, rails and repetition rules applied.
+    /// The zero, rails, repetition and clip rules applied.
     pub glitch_rules: bool,
+    /// Per axis, the low and high clip levels found (rows with a component
+    /// at one were dropped, [`Rule::Clipped`]).
+    pub clip_levels: [[Option<T>; 2]; 3],
     /// Rows farther than `radius` from `centre` (sensor units) were
     /// screened out.
     pub screen: Option<([T; 3], T)>,
@@ -231,13 +287,27 @@ impl<T: Real> Selection<T> {
     /// Every finite, representable row used: the plain pipeline's.
     pub const ALL: Self = Self {
         glitch_rules: false,
+        clip_levels: [[None; 2]; 3],
         screen: None,
         residual_limit: None,
     };
 
+    pub(crate) fn rules(&self) -> Rules<T> {
+        let level = |l: Option<T>| l.unwrap_or(T::MAX);
+        let [[a, b], [c, d], [e, f]] = self.clip_levels;
+        Rules {
+            glitches: self.glitch_rules,
+            clip: [
+                [level(a), level(b)],
+                [level(c), level(d)],
+                [level(e), level(f)],
+            ],
+        }
+    }
+
     pub(crate) fn gate(&self) -> Gate<T> {
         Gate {
-            glitches: self.glitch_rules,
+            rules: self.rules(),
             screen: self.screen.map(|(centre, r)| Ball {
                 centre,
                 radius_sq: r * r,
@@ -271,10 +341,13 @@ impl<T: Real> Selection<T> {
         calibration: &'a crate::Calibration<T>,
         samples: &'a [S],
     ) -> impl Iterator<Item = SampleClass> + 'a {
-        let ball = self.gate().screen;
+        let Gate {
+            rules,
+            screen: ball,
+        } = self.gate();
         let mut prev = None;
         samples.iter().map(move |s| {
-            let row = check::<T, S>(s, prev, self.glitch_rules);
+            let row = check::<T, S>(s, prev, &rules);
             prev = Some(s);
             let y = match row {
                 Ok(y) => y,
@@ -310,11 +383,11 @@ pub(crate) fn pieces<S>(samples: &[S], size: usize) -> impl Iterator<Item = (Opt
 }
 
 /// Counts the drops of every rule over the slice.
-pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Drops {
+pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Drops {
     let mut drops = Drops::default();
     let mut prev = None;
     for s in samples {
-        if let Err(rule) = check::<T, S>(s, prev, glitches) {
+        if let Err(rule) = check::<T, S>(s, prev, rules) {
             drops.count(rule);
         }
         prev = Some(s);
@@ -338,7 +411,7 @@ mod tests {
             [4.0, 5.0, 6.0],
             [4.0, 5.0, 6.5],
         ];
-        let d = count_drops::<f64, _>(&rows, true);
+        let d = count_drops::<f64, _>(&rows, &Rules::GLITCHES);
         assert_eq!(
             d,
             Drops {
@@ -346,14 +419,23 @@ mod tests {
                 overflow: 1,
                 zero: 2,
                 rails: 0,
-                repeated: 1
+                repeated: 1,
+                clipped: 0,
             }
         );
         assert_eq!(d.total(), 5);
-        let plain = count_drops::<f64, _>(&rows, false);
+        let plain = count_drops::<f64, _>(&rows, &Rules::PLAIN);
         assert_eq!((plain.total(), plain.non_finite, plain.overflow), (2, 1, 1));
         let ints: [[i16; 3]; 4] = [[1, 2, 3], [32767, 0, 1], [5, -32768, 1], [-32767, 4, 4]];
-        assert_eq!(count_drops::<f32, _>(&ints, true).rails, 3);
+        assert_eq!(count_drops::<f32, _>(&ints, &Rules::GLITCHES).rails, 3);
+        let clip = Rules {
+            glitches: true,
+            clip: [[f32::MAX, 5.0], [f32::MAX; 2], [-1.0, f32::MAX]],
+        };
+        assert_eq!(
+            count_drops::<f32, _>(&[[5i16, 0, 3], [4, 4, -1], [1, 2, 3]], &clip).clipped,
+            2
+        );
     }
 
     #[test]
@@ -365,7 +447,7 @@ mod tests {
             [3.0, 3.0, 1.0],
         ];
         let gate = Gate::<f32> {
-            glitches: true,
+            rules: Rules::GLITCHES,
             screen: Some(Ball {
                 centre: [0.0; 3],
                 radius_sq: 12.5,

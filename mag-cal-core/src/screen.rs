@@ -64,14 +64,13 @@ pub(crate) struct Screening<T: Real> {
     pub passes: u32,
 }
 
-/// Screens the rows the rules keep (`glitches`: see [`crate::rules`]).
+/// Screens the rows the scan's rules keep.
 pub(crate) fn screen<T: Real, S: Sample>(
     samples: &[S],
     scan: &Scan<T>,
-    glitches: bool,
 ) -> Result<Screening<T>, Error> {
     let gate = Gate {
-        glitches,
+        rules: scan.rules,
         screen: None,
     };
     let (centre, spread, mut passes) = median_centre(samples, scan, &gate);
@@ -103,7 +102,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     };
     // The shell: | |y - c| / m - 1 | of the rows inside the ball.
     let inside = Gate {
-        glitches,
+        rules: scan.rules,
         screen: Some(ball),
     };
     let inv_m = T::one() / m;

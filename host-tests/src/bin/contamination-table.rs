@@ -34,13 +34,25 @@ use mag_cal_core::{Config, Method};
 /// The configurations of the tables, with their labels. A new one (e.g.
 /// the robust configuration) is one more line.
 fn configs() -> Vec<(&'static str, Config)> {
+    let plain = Config {
+        robust: false,
+        ..Config::default()
+    };
     vec![
-        ("ADC2 (`Config::default()`)", Config::default()),
+        ("robust ADC2 (`Config::default()`)", Config::default()),
         (
-            "iterated ADC2 (`Method::Adc2Iterated`)",
+            "robust iterated ADC2 (`Method::Adc2Iterated`)",
             Config {
                 method: Method::Adc2Iterated,
                 ..Config::default()
+            },
+        ),
+        ("plain ADC2 (`robust: false`)", plain),
+        (
+            "plain iterated ADC2 (`robust: false`)",
+            Config {
+                method: Method::Adc2Iterated,
+                ..plain
             },
         ),
     ]
