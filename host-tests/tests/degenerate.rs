@@ -200,7 +200,7 @@ fn a_hyperboloid_is_not_an_ellipsoid() {
     // The plain LS fit is no ellipsoid; the robust path's crude sphere
     // then measures how far the rows are from any sphere.
     assert!(
-        matches!(fit(&y).unwrap_err(), Error::NoSphere { fit_error, .. } if fit_error > 0.25),
+        matches!(fit(&y).unwrap_err(), Error::NoSphere { fit_error, .. } if fit_error.get() > 0.25),
         "{:?}",
         fit(&y)
     );
@@ -287,7 +287,7 @@ fn an_expected_field_strength_catches_a_cap_fitted_too_small() {
         &mut rng,
     );
     assert!(
-        matches!(fit(&cap).unwrap_err(), Error::NoSphere { fit_error, .. } if fit_error < 0.25)
+        matches!(fit(&cap).unwrap_err(), Error::NoSphere { fit_error, .. } if fit_error.get() < 0.25)
     );
     let loose = Config {
         thresholds: Thresholds {

@@ -7,7 +7,7 @@ use core::fmt;
 /// Every input, however malformed, ends either in a calibration or in one of
 /// these values; the core never panics. The enum is `Copy` and small so that
 /// firmware can log or store it without ceremony.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum Error {
@@ -62,9 +62,9 @@ pub enum Error {
     /// or the rows are not one magnetometer's readings (a filled cloud).
     NoSphere {
         /// Robust fit error (standard deviation of `|u| - 1`).
-        fit_error: f32,
+        fit_error: Figure,
         /// The limit it exceeds.
-        limit: f32,
+        limit: Figure,
     },
     /// Too many rows are outliers to trust the rest: more than the limit's
     /// share of the rows kept by the rules were screened out or rejected
@@ -75,16 +75,16 @@ pub enum Error {
         /// Rows kept by the rules.
         valid: usize,
         /// The share that may be rejected.
-        limit: f32,
+        limit: Figure,
     },
     /// The calibrated samples sit systematically off the unit sphere in
     /// some region of directions: a disturbance displaced part of the
     /// trajectory, or an ellipsoid does not describe the sensor.
     SystematicMisfit {
         /// The lack-of-fit figure.
-        lack_of_fit: f32,
+        lack_of_fit: Figure,
         /// The limit it exceeds.
-        limit: f32,
+        limit: Figure,
     },
     /// Stored calibration bytes end early.
     Truncated,
@@ -152,7 +152,7 @@ impl fmt::Display for Error {
                 f,
                 "too many outliers: {rejected} of {valid} samples off the fitted ellipsoid (more than {:.0} %): \
                  a disturbance or a faulty sensor; collect again",
-                limit * 100.0
+                limit.get() * 100.0
             ),
             Error::SystematicMisfit { lack_of_fit, limit } => write!(
                 f,
@@ -170,3 +170,47 @@ impl fmt::Display for Error {
 }
 
 impl core::error::Error for Error {}
+
+/// A quality figure carried by an [`Error`]: an `f32` that compares by its
+/// bits, so that the error stays `Eq` and `Hash`. Formats as the number.
+#[derive(Clone, Copy, Debug)]
+pub struct Figure(f32);
+
+impl Figure {
+    /// The figure `value`.
+    pub const fn new(value: f32) -> Self {
+        Self(value)
+    }
+
+    /// Its value.
+    pub const fn get(self) -> f32 {
+        self.0
+    }
+}
+
+impl PartialEq for Figure {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.to_bits() == other.0.to_bits()
+    }
+}
+
+impl Eq for Figure {}
+
+impl core::hash::Hash for Figure {
+    fn hash<H: core::hash::Hasher>(&self, state: &mut H) {
+        self.0.to_bits().hash(state);
+    }
+}
+
+impl fmt::Display for Figure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(&self.0, f)
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Figure {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "{=f32}", self.0);
+    }
+}

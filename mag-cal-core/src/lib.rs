@@ -100,7 +100,7 @@ struct ReadmeDoctests;
 
 pub use calibration::Calibration;
 pub use ellipsoid::LsVariant;
-pub use error::Error;
+pub use error::{Error, Figure};
 pub use methods::Method;
 pub use nalgebra;
 pub use normalize::MIN_SAMPLES;

@@ -14,7 +14,7 @@ use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{pieces, Gate};
 use crate::sample::Sample;
-use crate::{Error, Real};
+use crate::{Error, Figure, Real};
 
 /// The figures behind the checks, for the report.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -254,7 +254,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     let lit = |x: f32| T::from_single(x);
     let below = |v: Option<T>, limit: f32| v.is_some_and(|v| !(v >= lit(limit)));
     let above = |v: Option<T>, limit: f32| v.is_some_and(|v| !(v <= lit(limit)));
-    let fig = |v: T| v.to_single();
+    let fig = |v: T| Figure::new(v.to_single());
     let mut w = Warnings::NONE;
     if below(f.flatness, th.refuse_flatness) {
         return Err(Error::Planar);
@@ -265,7 +265,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     {
         return Err(Error::NoSphere {
             fit_error: fig(e),
-            limit: th.refuse_fit_error,
+            limit: Figure::new(th.refuse_fit_error),
         });
     }
     if f.robust {
@@ -274,7 +274,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
                 return Err(Error::TooManyOutliers {
                     rejected: f.valid.saturating_sub(used),
                     valid: f.valid,
-                    limit: th.refuse_outlier_share,
+                    limit: Figure::new(th.refuse_outlier_share),
                 });
             }
         }
@@ -284,7 +284,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         if let Some(l) = f.lack_of_fit.filter(|_| misfit) {
             return Err(Error::SystematicMisfit {
                 lack_of_fit: fig(l),
-                limit: th.refuse_lack_of_fit,
+                limit: Figure::new(th.refuse_lack_of_fit),
             });
         }
     }

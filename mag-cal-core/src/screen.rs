@@ -92,8 +92,8 @@ pub(crate) fn screen<T: Real, S: Sample>(
     if !(m > T::zero()) || !m.is_finite() {
         // More than half the rows sit on the median centre.
         return Err(Error::NoSphere {
-            fit_error: f32::INFINITY,
-            limit: 0.0,
+            fit_error: crate::Figure::new(f32::INFINITY),
+            limit: crate::Figure::new(crate::quality::REFUSE_FIT_ERROR as f32),
         });
     }
     let ball = Ball {

@@ -88,6 +88,9 @@ fn setup() -> Result<(), String> {
     // Reads rust-toolchain.toml: the pinned channel, the thumb target,
     // clippy and rustfmt.
     run(&root, "rustup", &["toolchain", "install"])?;
+    // A toolchain of that channel installed earlier without the target
+    // (seen: `toolchain install` then leaves it out); a no-op when present.
+    run(&root, "rustup", &["target", "add", "thumbv7em-none-eabihf"])?;
     if !on_path("qemu-system-arm") {
         if !on_path("apt-get") {
             return Err("qemu-system-arm is missing and apt-get is not available: install QEMU's ARM system emulator".into());
