@@ -35,8 +35,6 @@ const LOG_BASE: u32 = (127 - 24) << 3;
 #[derive(Clone, Debug)]
 pub(crate) struct LogHistogram {
     bins: [u16; LOG_BINS],
-    /// Sum of the bins (kept through halvings).
-    total: u32,
 }
 
 impl LogHistogram {
@@ -44,7 +42,6 @@ impl LogHistogram {
     pub(crate) const fn new() -> Self {
         Self {
             bins: [0; LOG_BINS],
-            total: 0,
         }
     }
 
@@ -62,7 +59,6 @@ impl LogHistogram {
     fn bump(&mut self, k: usize) {
         if let Some(c) = self.bins.get_mut(k) {
             *c += 1;
-            self.total += 1;
             if *c == u16::MAX {
                 self.halve();
             }
@@ -72,26 +68,24 @@ impl LogHistogram {
     /// Halves every counter (rare: once per 65 535 counts in one bin).
     #[inline(never)]
     fn halve(&mut self) {
-        let mut total = 0u32;
         for c in self.bins.iter_mut() {
             *c /= 2;
-            total += u32::from(*c);
         }
-        self.total = total;
     }
 
-    /// Number of counts.
+    /// Number of counts (of the halved counters, after a halving).
     pub(crate) fn total(&self) -> u32 {
-        self.total
+        self.bins.iter().map(|&c| u32::from(c)).sum()
     }
 
     /// The value below which the share `p` (in `[0, 1]`) of the counts lie,
     /// interpolated inside its bin; `None` when the histogram is empty.
     pub(crate) fn quantile<T: Real>(&self, p: T) -> Option<T> {
-        if self.total == 0 {
+        let total = self.total();
+        if total == 0 {
             return None;
         }
-        let target = p * T::from_count(self.total as usize);
+        let target = p * T::from_count(total as usize);
         let mut below = T::zero();
         for (k, &c) in self.bins.iter().enumerate() {
             let c = T::from_count(usize::from(c));

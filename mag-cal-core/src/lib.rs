@@ -275,7 +275,7 @@ fn pipeline<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples, config.robust)?;
-    if config.robust && (scan.drops.glitches() > 0 || scan.gross()) {
+    if config.robust && scan.drops.glitches() > 0 {
         return robust_path(samples, config, &scan, ls_solve, step);
     }
     match plain_path(samples, config, &scan, ls_solve, step) {
@@ -306,6 +306,10 @@ fn plain_path<T: Real, S: Sample>(
     let norm = scan.norm;
     let mut figures = Figures::new(scan, config, false);
     let moments = moments::Moments::accumulate(samples, &norm);
+    if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
+        // Gross outliers: not worth a plain fit (the caller screens).
+        return Err(Error::OutOfRange);
+    }
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {
         (Ok(ls), gap) => (ls, gap),
@@ -320,7 +324,7 @@ fn plain_path<T: Real, S: Sample>(
         robust_passes: 0,
         screen: None,
     };
-    let done = finish(samples, config, scan, &start, step, figures)?;
+    let done = finish(samples, config, &start, step, figures)?;
     let fit = done.fit;
     let sigma = fit.report.quality.fit_error;
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
@@ -349,8 +353,10 @@ fn robust_path<T: Real, S: Sample>(
 ) -> Result<Fit<T>, Error> {
     let mut figures = Figures::new(scan, config, true);
     let screening = screen::screen(samples, scan)?;
+    figures.drops = screening.drops;
+    figures.valid = screening.valid;
     let gate = rules::Gate {
-        rules: scan.rules,
+        rules: screening.rules,
         screen: Some(screening.ball),
     };
     let crude = robust::crude_moments(samples, &screening, &gate);
@@ -376,7 +382,7 @@ fn robust_path<T: Real, S: Sample>(
         robust_passes: screening.passes + fitted.passes,
         screen: Some(screening.ball),
     };
-    finish(samples, config, scan, &start, step, figures).map(|done| done.fit)
+    finish(samples, config, &start, step, figures).map(|done| done.fit)
 }
 
 /// A fit and what decides whether the plain one is clean.
@@ -394,7 +400,6 @@ struct Finished<T: Real> {
 fn finish<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
-    scan: &normalize::Scan<T>,
     start: &Start<T>,
     step: methods::Step<T, S>,
     mut figures: Figures<T>,
@@ -453,9 +458,9 @@ fn finish<T: Real, S: Sample>(
         passes: est.passes,
         robust_passes: start.robust_passes,
         samples_used: last.used,
-        samples_dropped: scan.drops.total(),
-        drops: scan.drops,
-        screened: scan.used.saturating_sub(last.passed),
+        samples_dropped: figures.drops.total(),
+        drops: figures.drops,
+        screened: figures.valid.saturating_sub(last.passed),
         rejected: last.passed.saturating_sub(last.used),
         radial_rms: last.radial_rms,
         quality,

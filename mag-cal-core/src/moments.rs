@@ -9,7 +9,7 @@ use nalgebra::SMatrix;
 
 use crate::histogram::LogHistogram;
 use crate::normalize::{Normalization, Projector};
-use crate::rules::{pieces, Gate};
+use crate::rules::{check, pieces, Gate, Rules};
 use crate::sample::Sample;
 use crate::Real;
 
@@ -91,7 +91,17 @@ impl<T: Real> Moments<T> {
     /// `f32` and `[i16; 3]` samples at opt-level "s", against 134 for one
     /// loop (design document, section 13).
     pub fn accumulate<S: Sample>(samples: &[S], norm: &Normalization<T>) -> Self {
-        Self::accumulate_with(samples, norm, &Gate::PLAIN, None, None).0
+        let mut sums = [T::zero(); COUNT];
+        let (low, high) = sums.split_at_mut(LOW);
+        for block in samples.chunks(BLOCK) {
+            for (t, v) in low.iter_mut().zip(plain_low(block, norm)) {
+                *t += v;
+            }
+            for (t, v) in high.iter_mut().zip(plain_high(block, norm)) {
+                *t += v;
+            }
+        }
+        Self { sums }
     }
 
     /// [`Moments::accumulate`] over the rows `gate` passes and, with a
@@ -107,6 +117,10 @@ impl<T: Real> Moments<T> {
         cut: Option<&Cut<T>>,
         mut hist: Option<&mut LogHistogram>,
     ) -> (Self, usize) {
+        if gate.is_plain() && cut.is_none() {
+            let m = Self::accumulate(samples, norm);
+            return (m, m.count());
+        }
         let mut sums = [T::zero(); COUNT];
         let mut passed = 0;
         let (low, high) = sums.split_at_mut(LOW);
@@ -134,6 +148,21 @@ impl<T: Real> Moments<T> {
         }
     }
 
+    /// `n sum|x|^4 / (sum|x|^2)^2`: 1 for samples on a sphere about the
+    /// origin, large when a few samples lie far out.
+    pub fn kurtosis(&self) -> T {
+        let two = T::lit(2.0);
+        let m2 = self.get(2, 0, 0) + self.get(0, 2, 0) + self.get(0, 0, 2);
+        let m4 = self.get(4, 0, 0)
+            + self.get(0, 4, 0)
+            + self.get(0, 0, 4)
+            + two * (self.get(2, 2, 0) + self.get(2, 0, 2) + self.get(0, 2, 2));
+        if !(m2 > T::zero()) {
+            return T::zero();
+        }
+        self.get(0, 0, 0) * m4 / (m2 * m2)
+    }
+
     /// `sum x^p y^q z^r`.
     #[inline]
     pub fn get(&self, p: u8, q: u8, r: u8) -> T {
@@ -155,6 +184,41 @@ impl<T: Real> Moments<T> {
 
 /// Moments of degrees 0-3: positions `0..LOW` of [`EXPONENTS`].
 const LOW: usize = 20;
+
+/// The finite sample `s`, normalised.
+#[inline(always)]
+fn point<T: Real, S: Sample>(s: &S, norm: &Normalization<T>) -> Option<[T; 3]> {
+    let (c, is) = (&norm.centre, norm.inv_scale);
+    check::<T, S>(s, None, &Rules::PLAIN)
+        .ok()
+        .map(|[a, b, d]| [(a - c.x) * is, (b - c.y) * is, (d - c.z) * is])
+}
+
+/// The count and the sums of the monomials of degrees 1-3 over the finite
+/// samples of `block`, in [`EXPONENTS`] order (the plain pass).
+#[inline(never)]
+fn plain_low<T: Real, S: Sample>(block: &[S], norm: &Normalization<T>) -> [T; LOW] {
+    let mut a = [T::zero(); LOW];
+    // An integer count leaves the floating-point registers to the sums.
+    let mut count = 0;
+    for [x, y, z] in block.iter().filter_map(|s| point(s, norm)) {
+        count += 1;
+        add_low(&mut a, x, y, z);
+    }
+    a[0] = T::from_count(count);
+    a
+}
+
+/// The sums of the monomials of degree 4 over the finite samples of
+/// `block`, in [`EXPONENTS`] order (the plain pass).
+#[inline(never)]
+fn plain_high<T: Real, S: Sample>(block: &[S], norm: &Normalization<T>) -> [T; COUNT - LOW] {
+    let mut a = [T::zero(); COUNT - LOW];
+    for [x, y, z] in block.iter().filter_map(|s| point(s, norm)) {
+        add_high(&mut a, x, y, z);
+    }
+    a
+}
 
 /// Words of a block's mask of kept rows.
 const MASK_WORDS: usize = BLOCK / 32;

@@ -7,7 +7,7 @@
 
 use nalgebra::Vector3;
 
-use crate::rules::{count_drops, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
+use crate::rules::{count_drops, Drops, Filter, Finite, Gate, Rules};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
@@ -52,33 +52,16 @@ pub(crate) struct Scan<T: Real> {
     pub used: usize,
     /// Rows the rules dropped, by rule.
     pub drops: Drops,
-    /// The rules, with the clip levels found.
+    /// The rules applied (without clip levels: screening finds those).
     pub rules: Rules<T>,
-    /// Smallest and largest kept value of each axis.
-    pub lo: [T; 3],
-    pub hi: [T; 3],
 }
 
-/// Extent of the kept samples from their mean, in units of their RMS
-/// spread, beyond which the scan reports gross outliers ([`Scan::gross`]):
-/// on any axis, an ellipsoid's samples reach at most 1.7 spreads from
-/// their mean (axis ratio 4, the largest distortion accepted), a cap or
-/// band of it less; one wild sample among `n` reaches `sqrt(n)` spreads.
-pub(crate) const GROSS_EXTENT: f64 = 3.0;
-
-impl<T: Real> Scan<T> {
-    /// Whether some kept sample lies so far from the others that it cannot
-    /// be on the same ellipsoid ([`GROSS_EXTENT`]): the fit must then
-    /// screen before it normalises.
-    pub(crate) fn gross(&self) -> bool {
-        let c = &self.norm.centre;
-        let limit = self.norm.scale * T::lit(GROSS_EXTENT);
-        [c.x, c.y, c.z]
-            .iter()
-            .zip(self.lo.iter().zip(&self.hi))
-            .any(|(&m, (&lo, &hi))| !(hi - m <= limit && m - lo <= limit))
-    }
-}
+/// The kurtosis `n sum|x|^4 / (sum|x|^2)^2` of the normalised samples above
+/// which the plain fit is not tried (gross outliers): 1 for a sphere, at
+/// most about 1.8 for an ellipsoid of axis ratio 4 (the largest distortion
+/// accepted), 1.7 for a Gaussian blob; one wild sample at `D` spreads among
+/// `n` adds about `D^4 / n`. It costs nothing: the LS moments hold it.
+pub(crate) const GROSS_KURTOSIS: f64 = 3.0;
 
 /// One pass over the samples: applies the drop rules (the glitch rules
 /// when `glitches` is set, see [`crate::rules`]), counts, validates and
@@ -90,11 +73,23 @@ impl<T: Real> Scan<T> {
 /// in a second pass around the now-known mean.
 pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<Scan<T>, Error> {
     let zero = T::zero();
-    let mut gate = Gate {
-        rules: if glitches {
-            Rules::GLITCHES
-        } else {
+    // The rules first, in a loop of their own (integer compares for integer
+    // samples): when nothing is dropped, the sums take the plain loop.
+    let rules = if glitches {
+        Rules::GLITCHES
+    } else {
+        Rules::PLAIN
+    };
+    let mut drops = if glitches {
+        count_drops::<T, S>(samples, &rules)
+    } else {
+        Drops::default()
+    };
+    let gate = Gate {
+        rules: if drops.total() == 0 {
             Rules::PLAIN
+        } else {
+            rules
         },
         screen: None,
     };
@@ -118,35 +113,22 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         used: 0,
         sum: [zero; 3],
         sum_sq: zero,
-        lo: [zero; 3],
-        hi: [zero; 3],
-        at_lo: [0; 3],
-        at_hi: [0; 3],
     };
     if let Some(o) = origin {
-        sums = sums_about(rest, before_rest, o, &gate);
+        sums = if gate.is_plain() {
+            sums_about(rest, before_rest, o, &Finite)
+        } else {
+            sums_about(rest, before_rest, o, &gate)
+        };
         sums.used += 1;
     }
-    if glitches {
-        gate.rules.clip = clip_levels(&sums, sums.used);
+    let Sums { used, sum, sum_sq } = sums;
+    if used + drops.total() != samples.len() {
+        // Non-finite rows in the plain pipeline (which counts after the
+        // sums); with the glitch rules this cannot happen, as both loops
+        // apply the same rules.
+        drops = count_drops::<T, S>(samples, &gate.rules);
     }
-    let clipping = gate.rules.clip != Rules::<T>::PLAIN.clip;
-    let Sums {
-        mut used,
-        sum,
-        sum_sq,
-        lo,
-        hi,
-        ..
-    } = sums;
-    let drops = if used < samples.len() || clipping {
-        count_drops::<T, S>(samples, &gate.rules)
-    } else {
-        Drops::default()
-    };
-    // The sums include the clipped rows: the robust path, which clipping
-    // selects, normalises on its own screening.
-    used -= drops.clipped.min(used);
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
         if drops.overflow * 2 > drops.total() {
             // Most rows are too large to compute with.
@@ -165,7 +147,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     };
     // Every difference is zero, or so small that its square underflows
     // (then the spread is refused below): tell the two apart.
-    if !(sum_sq > zero) && lo == hi {
+    if !(sum_sq > zero) && gate.rows(rest, before_rest).all(|y| y == o) {
         return Err(Error::AllSamplesEqual);
     }
     let n = T::from_count(sums.used);
@@ -176,15 +158,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     // Catastrophic cancellation: y0 lies far outside the cloud (a wild first
     // sample). Recompute the spread around the mean; this path is rare.
     if !(var > mean_sq * T::lit(1e-2)) {
-        // Over the rows the sums saw (the clipped ones included).
-        let unclipped = Gate {
-            rules: Rules {
-                clip: Rules::<T>::PLAIN.clip,
-                ..gate.rules
-            },
-            screen: None,
-        };
-        var = spread_about(samples, &centre, &unclipped) / n;
+        var = spread_about(samples, &centre, &gate) / n;
     }
     // Refuse spreads whose squares overflow, or that are so small that their
     // squares approach the subnormal range and lose significant bits.
@@ -203,59 +177,32 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         },
         used,
         drops,
-        rules: gate.rules,
-        lo,
-        hi,
+        rules,
     })
 }
 
-/// Count, `sum (y - o)`, `sum |y - o|^2`, and per axis the smallest and
-/// largest kept value with the number of rows at each, over the kept
-/// samples.
+/// Count, `sum (y - o)` and `sum |y - o|^2` over the kept samples.
 struct Sums<T> {
     used: usize,
     sum: [T; 3],
     sum_sq: T,
-    lo: [T; 3],
-    hi: [T; 3],
-    at_lo: [usize; 3],
-    at_hi: [usize; 3],
 }
 
-/// Tracks the extreme of one axis and the rows that share it.
-#[inline(always)]
-fn extremes<T: Real>(v: T, lo: &mut T, at_lo: &mut usize, hi: &mut T, at_hi: &mut usize) {
-    if v > *hi {
-        *hi = v;
-        *at_hi = 1;
-    } else if v == *hi {
-        *at_hi += 1;
-    }
-    if v < *lo {
-        *lo = v;
-        *at_lo = 1;
-    } else if v == *lo {
-        *at_lo += 1;
-    }
-}
-
-/// [`Sums`] of the kept samples about the origin `o` (`prev`: the row
-/// before `samples`; the origin itself counts as a kept row at the
-/// extremes): the loop of [`scan`], on scalars and on its own (not
-/// inlined), so that nothing of the caller competes for its registers.
+/// [`Sums`] of the rows `filter` keeps about the origin `o` (`prev`: the
+/// row before `samples`): the loop of [`scan`], on scalars and on its own
+/// (not inlined), so that nothing of the caller competes for its
+/// registers.
 #[inline(never)]
-fn sums_about<T: Real, S: Sample>(
+fn sums_about<T: Real, S: Sample, F: Filter<T>>(
     samples: &[S],
     prev: Option<&S>,
     o: [T; 3],
-    gate: &Gate<T>,
+    filter: &F,
 ) -> Sums<T> {
     let [o0, o1, o2] = o;
     let (mut s0, mut s1, mut s2, mut sq) = (T::zero(), T::zero(), T::zero(), T::zero());
-    let ([mut lo0, mut lo1, mut lo2], [mut hi0, mut hi1, mut hi2]) = (o, o);
-    let ([mut nl0, mut nl1, mut nl2], [mut nh0, mut nh1, mut nh2]) = ([1usize; 3], [1usize; 3]);
     let mut used = 0;
-    for [y0, y1, y2] in gate.rows(samples, prev) {
+    for [y0, y1, y2] in filter.rows(samples, prev) {
         let (d0, d1, d2) = (y0 - o0, y1 - o1, y2 - o2);
         s0 += d0;
         s1 += d1;
@@ -263,46 +210,13 @@ fn sums_about<T: Real, S: Sample>(
         sq += d0 * d0;
         sq += d1 * d1;
         sq += d2 * d2;
-        extremes(y0, &mut lo0, &mut nl0, &mut hi0, &mut nh0);
-        extremes(y1, &mut lo1, &mut nl1, &mut hi1, &mut nh1);
-        extremes(y2, &mut lo2, &mut nl2, &mut hi2, &mut nh2);
         used += 1;
     }
     Sums {
         used,
         sum: [s0, s1, s2],
         sum_sq: sq,
-        lo: [lo0, lo1, lo2],
-        hi: [hi0, hi1, hi2],
-        at_lo: [nl0, nl1, nl2],
-        at_hi: [nh0, nh1, nh2],
     }
-}
-
-/// The clip levels of [`Rules`]: an axis's extreme value that at least
-/// [`CLIP_SHARE`] of the `used` rows (and [`CLIP_MIN_ROWS`]) share, but not
-/// most of them: an axis that hardly varies (planar data) is no clipping.
-fn clip_levels<T: Real>(s: &Sums<T>, used: usize) -> [[T; 2]; 3] {
-    let many = ((used as f64 * CLIP_SHARE) as usize).max(CLIP_MIN_ROWS);
-    let level = |v: T, n: usize| {
-        if n >= many && n <= used / 2 {
-            v
-        } else {
-            T::MAX
-        }
-    };
-    let mut out = [[T::MAX; 2]; 3];
-    for (o, ((&lo, &hi), (&nl, &nh))) in out
-        .iter_mut()
-        .zip(s.lo.iter().zip(&s.hi).zip(s.at_lo.iter().zip(&s.at_hi)))
-    {
-        *o = if lo < hi {
-            [level(lo, nl), level(hi, nh)]
-        } else {
-            [T::MAX; 2]
-        };
-    }
-    out
 }
 
 /// `sum |y - c|^2` over the kept samples.

@@ -12,7 +12,7 @@ use crate::histogram::LogHistogram;
 use crate::linalg::{larger, min_max, sym_eigenvalues, to_array, tridiagonal};
 use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
-use crate::rules::{pieces, Gate};
+use crate::rules::{pieces, Filter, Finite, Gate};
 use crate::sample::Sample;
 use crate::{Error, Figure, Real};
 
@@ -577,12 +577,15 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     };
     let spec = BlockSpec {
         map: &map,
-        gate,
         limit: limit.unwrap_or(T::MAX),
         directions: directions.is_none(),
     };
     for (prev, block) in pieces(samples, BLOCK) {
-        final_block(block, prev, &spec, &mut hist, &mut cells, &mut acc);
+        if gate.is_plain() {
+            final_block(block, prev, &Finite, &spec, &mut hist, &mut cells, &mut acc);
+        } else {
+            final_block(block, prev, gate, &spec, &mut hist, &mut cells, &mut acc);
+        }
     }
     let t = acc.sums;
     let dirs = directions.unwrap_or(DirectionSums {
@@ -639,7 +642,6 @@ fn direction_figures<T: Real>(d: &DirectionSums<T>) -> Result<(T, T), Error> {
 /// What the final pass does with each row.
 struct BlockSpec<'a, T: Real> {
     map: &'a Projector<T>,
-    gate: &'a Gate<T>,
     limit: T,
     /// Sum the directions of the rows used.
     directions: bool,
@@ -657,9 +659,10 @@ struct Accumulated<T: Real> {
 /// The final pass over one block (not inlined: the floating-point
 /// registers are then the loop's alone).
 #[inline(never)]
-fn final_block<T: Real, S: Sample>(
+fn final_block<T: Real, S: Sample, F: Filter<T>>(
     block: &[S],
     prev: Option<&S>,
+    filter: &F,
     spec: &BlockSpec<'_, T>,
     hist: &mut LogHistogram,
     cells: &mut Cells<T>,
@@ -669,7 +672,7 @@ fn final_block<T: Real, S: Sample>(
     let mut a = [T::zero(); 10];
     let mut max = acc.max;
     let (mut passed, mut used) = (0, 0);
-    for y in spec.gate.rows(block, prev) {
+    for y in filter.rows(block, prev) {
         let u = spec.map.project(y);
         let [ux, uy, uz] = u;
         passed += 1;

@@ -7,8 +7,10 @@ use crate::{Error, Real};
 /// Implemented for `[f32; 3]`, `[f64; 3]`, `[i16; 3]` (the native output of
 /// most magnetometers: 6 bytes a sample) and `[i32; 3]`. Conversion to the
 /// working precision happens per sample inside each pass, so a store of `i16`
-/// never needs a floating-point copy.
-pub trait Sample: Copy {
+/// never needs a floating-point copy. `PartialEq` compares raw rows: the
+/// repetition rule ([`crate::Rule::Repeated`]) drops a row equal to the one
+/// before.
+pub trait Sample: Copy + PartialEq {
     /// The three components in the working precision. A value that does not
     /// fit the working precision (an `f64` of `1e300` read as `f32`) becomes
     /// non-finite and the sample is then skipped and counted as dropped.
@@ -30,6 +32,14 @@ pub trait Sample: Copy {
     fn on_rails(&self) -> bool {
         false
     }
+
+    /// Whether the row is exactly `(0, 0, 0)` (a failed bus read). The
+    /// default converts to `f32`; the provided types compare their own
+    /// values (integer compares on a Cortex-M4F).
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        self.xyz::<f32>() == [0.0; 3]
+    }
 }
 
 // The conversions are written out per component: `<[_; 3]>::map` compiles
@@ -41,6 +51,10 @@ impl Sample for [f32; 3] {
         let [x, y, z] = *self;
         [T::from_single(x), T::from_single(y), T::from_single(z)]
     }
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        *self == [0.0; 3]
+    }
 }
 
 impl Sample for [f64; 3] {
@@ -48,6 +62,10 @@ impl Sample for [f64; 3] {
     fn xyz<T: Real>(&self) -> [T; 3] {
         let [x, y, z] = *self;
         [T::lit(x), T::lit(y), T::lit(z)]
+    }
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        *self == [0.0; 3]
     }
 }
 
@@ -60,8 +78,13 @@ impl Sample for [i16; 3] {
     const ALWAYS_FINITE: bool = true;
     #[inline(always)]
     fn on_rails(&self) -> bool {
-        let rail = |v: i16| v == i16::MAX || v <= -i16::MAX;
-        rail(self[0]) || rail(self[1]) || rail(self[2])
+        // v >= 32767 or v <= -32767, in one unsigned compare a component.
+        let rail = |v: i16| (i32::from(v) + 32766) as u32 >= 65533;
+        rail(self[0]) | rail(self[1]) | rail(self[2])
+    }
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        self[0] | self[1] | self[2] == 0
     }
 }
 
@@ -77,8 +100,14 @@ impl Sample for [i32; 3] {
     /// `i32::MAX`, `-i32::MAX` or `i32::MIN`.
     #[inline(always)]
     fn on_rails(&self) -> bool {
-        let rail = |v: i32| v == i32::MAX || v <= -i32::MAX;
-        rail(self[0]) || rail(self[1]) || rail(self[2])
+        // v >= MAX or v <= -MAX, in one unsigned compare a component.
+        let rail =
+            |v: i32| (i64::from(v) + i64::from(i32::MAX - 1)) as u64 >= 2 * i32::MAX as u64 - 1;
+        rail(self[0]) | rail(self[1]) | rail(self[2])
+    }
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        self[0] | self[1] | self[2] == 0
     }
 }
 

@@ -21,8 +21,9 @@
 //! Cortex-M4F); nothing is sorted or stored per sample.
 
 use crate::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
+use crate::linalg::{larger, smaller};
 use crate::normalize::{Normalization, Scan};
-use crate::rules::{pieces, Ball, Gate};
+use crate::rules::{count_drops, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
@@ -48,6 +49,12 @@ pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 /// What screening found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Screening<T: Real> {
+    /// The scan's rules with the clip levels found.
+    pub rules: Rules<T>,
+    /// Rows dropped by each rule (the clipped ones included).
+    pub drops: Drops,
+    /// Rows the rules keep.
+    pub valid: usize,
     /// The screening ball: median centre, radius [`SCREEN_RADIUS`]` m`.
     pub ball: Ball<T>,
     /// The normalisation of the robust path: median centre, scale `m`.
@@ -69,11 +76,11 @@ pub(crate) fn screen<T: Real, S: Sample>(
     samples: &[S],
     scan: &Scan<T>,
 ) -> Result<Screening<T>, Error> {
+    let (centre, spread, rules, mut passes) = median_centre(samples, scan);
     let gate = Gate {
-        rules: scan.rules,
+        rules,
         screen: None,
     };
-    let (centre, spread, mut passes) = median_centre(samples, scan, &gate);
     if !(spread > T::zero()) || !spread.is_finite() {
         return Err(Error::AllSamplesEqual);
     }
@@ -102,7 +109,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     };
     // The shell: | |y - c| / m - 1 | of the rows inside the ball.
     let inside = Gate {
-        rules: scan.rules,
+        rules,
         screen: Some(ball),
     };
     let inv_m = T::one() / m;
@@ -119,34 +126,63 @@ pub(crate) fn screen<T: Real, S: Sample>(
         scale: m,
         inv_scale: inv_m,
     };
+    let drops = if rules.clipping {
+        count_drops::<T, S>(samples, &rules)
+    } else {
+        scan.drops
+    };
+    let valid = scan.used.saturating_sub(drops.clipped);
     Ok(Screening {
+        rules,
+        drops,
+        valid,
         ball,
         norm,
         // Halvings in a histogram of more than 65 535 rows can leave its
         // total a little short: never report a negative count.
-        screened: scan.used.saturating_sub(kept.min(scan.used)),
+        screened: valid.saturating_sub(kept.min(valid)),
         band,
         sphere_error,
         passes,
     })
 }
 
-/// The coordinate-wise median of the rows the gate passes, the mean of the
-/// axes' inter-quartile ranges, and the passes it took.
-fn median_centre<T: Real, S: Sample>(
-    samples: &[S],
-    scan: &Scan<T>,
-    gate: &Gate<T>,
-) -> ([T; 3], T, u32) {
-    let (mut lo, mut hi) = (scan.lo, scan.hi);
+/// The coordinate-wise median of the rows the scan's rules keep, the mean
+/// of the axes' inter-quartile ranges, the rules with the clip levels found
+/// in the first pass (rows at the scan's extremes, [`crate::rules::CLIP_SHARE`]),
+/// and the passes it took.
+fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
+    let rows = Gate {
+        rules: scan.rules,
+        screen: None,
+    };
+    let mut first = None;
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        bounds(block, prev, &rows, &mut first);
+    }
+    let (box_lo, box_hi) = first.unwrap_or(([T::zero(); 3], [T::zero(); 3]));
+    let (mut lo, mut hi) = (box_lo, box_hi);
     let mut median = [T::zero(); 3];
     let mut iqr = [T::zero(); 3];
     let mut done = [false; 3];
     let mut passes = 0;
+    let mut rules = scan.rules;
     while passes < MAX_LEVELS && !done.iter().all(|&d| d) {
         let mut h = AxisHistograms::new(lo, hi);
-        for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-            fill(block, prev, gate, &mut h);
+        let gate = Gate {
+            rules,
+            screen: None,
+        };
+        if passes == 0 {
+            let mut at = [[0usize; 2]; 3];
+            for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+                fill_first(block, prev, &gate, (&box_lo, &box_hi), &mut at, &mut h);
+            }
+            rules = Rules::with_clip(clip_levels(scan.used, (&box_lo, &box_hi), &at));
+        } else {
+            for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+                fill(block, prev, &gate, &mut h);
+            }
         }
         passes += 1;
         for a in 0..3 {
@@ -180,7 +216,72 @@ fn median_centre<T: Real, S: Sample>(
         }
     }
     let spread = (iqr[0] + iqr[1] + iqr[2]) / T::lit(3.0);
-    (median, spread, passes)
+    // The bounds took a pass too.
+    (median, spread, rules, passes + 1)
+}
+
+/// Widens `acc` (smallest and largest value of each axis) by the rows of
+/// `block` the gate passes.
+#[inline(never)]
+fn bounds<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    gate: &Gate<T>,
+    acc: &mut Option<([T; 3], [T; 3])>,
+) {
+    for y in gate.rows(block, prev) {
+        let (lo, hi) = acc.get_or_insert((y, y));
+        for ((l, u), v) in lo.iter_mut().zip(hi.iter_mut()).zip(y) {
+            *l = smaller(*l, v);
+            *u = larger(*u, v);
+        }
+    }
+}
+
+/// [`fill`], also counting per axis the rows at the smallest and the
+/// largest value (`at`).
+#[inline(never)]
+fn fill_first<T: Real, S: Sample>(
+    block: &[S],
+    prev: Option<&S>,
+    gate: &Gate<T>,
+    (lo, hi): (&[T; 3], &[T; 3]),
+    at: &mut [[usize; 2]; 3],
+    h: &mut AxisHistograms<T>,
+) {
+    for y in gate.rows(block, prev) {
+        for ((&v, (&l, &u)), n) in y.iter().zip(lo.iter().zip(hi)).zip(at.iter_mut()) {
+            n[0] += usize::from(v == l);
+            n[1] += usize::from(v == u);
+        }
+        h.add(y);
+    }
+}
+
+/// The clip levels: an axis's extreme value that at least
+/// [`crate::rules::CLIP_SHARE`] of the rows (and
+/// [`crate::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
+/// that hardly varies (planar data) is no clipping.
+fn clip_levels<T: Real>(
+    used: usize,
+    (lo, hi): (&[T; 3], &[T; 3]),
+    at: &[[usize; 2]; 3],
+) -> [[T; 2]; 3] {
+    let many = ((used as f64 * CLIP_SHARE) as usize).max(CLIP_MIN_ROWS);
+    let level = |v: T, n: usize| {
+        if n >= many && n <= used / 2 {
+            v
+        } else {
+            T::MAX
+        }
+    };
+    let mut out = [[T::MAX; 2]; 3];
+    for (o, ((&lo, &hi), &[nl, nh])) in out.iter_mut().zip(lo.iter().zip(hi).zip(at)) {
+        if lo < hi {
+            *o = [level(lo, nl), level(hi, nh)];
+        }
+    }
+    out
 }
 
 /// Adds the rows of `block` that the gate passes to the histograms.

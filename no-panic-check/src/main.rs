@@ -219,6 +219,15 @@ fn fit<T: Real, S: Sample>(samples: &'static RawSlice<S>, raw: [T; 3]) {
         for warning in fit.report.warnings.iter() {
             keep(warning);
         }
+        // Classifying rows afterwards, with the fit's selection and with an
+        // arbitrary one (a selection read back from storage).
+        for class in fit.report.selection.classify(cal, samples.get()) {
+            keep(class);
+        }
+        let selection = opaque(&fit.report.selection);
+        for class in selection.classify(cal, samples.get()) {
+            keep(class);
+        }
     }
     keep(result);
 }

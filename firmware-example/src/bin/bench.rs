@@ -74,7 +74,7 @@ use cortex_m::peripheral::SYST;
 use cortex_m_rt::{entry, exception};
 use defmt::println;
 use firmware_example::platform;
-use firmware_example::sim::{Scenario, Simulator};
+use firmware_example::sim::{Scenario, Simulator, SplitMix64};
 use mag_cal_core::artificial::Stats;
 use mag_cal_core::ellipsoid;
 use mag_cal_core::methods::adc2;
@@ -213,6 +213,126 @@ fn normalization(samples: &[[i16; 3]]) -> Normalization<f32> {
     }
 }
 
+/// Contamination kinds for the robust benchmarks (design document,
+/// section 14), applied in place to `i16` samples of a 320-count field.
+#[derive(Clone, Copy)]
+enum Kind {
+    /// Wild values anywhere in the i16 range (an I2C glitch).
+    Spike,
+    /// One axis on the rail.
+    Rail,
+    /// Exact zero rows.
+    Zero,
+    /// Runs of 10 repeated rows.
+    Stuck,
+    /// Isolated rows displaced by 0.3 of the field.
+    Displace03,
+    /// Isolated rows displaced by one field.
+    Displace1,
+    /// A contiguous stretch of the spiral displaced by 0.3 of the field.
+    Patch,
+}
+
+impl Kind {
+    const ALL: [Kind; 7] = [
+        Kind::Spike,
+        Kind::Rail,
+        Kind::Zero,
+        Kind::Stuck,
+        Kind::Displace03,
+        Kind::Displace1,
+        Kind::Patch,
+    ];
+
+    fn bench_name(self) -> &'static str {
+        match self {
+            Kind::Spike => "robust-spike",
+            Kind::Rail => "robust-rail",
+            Kind::Zero => "robust-zero",
+            Kind::Stuck => "robust-stuck",
+            Kind::Displace03 => "robust-displace-0.3",
+            Kind::Displace1 => "robust-displace-1",
+            Kind::Patch => "robust-patch",
+        }
+    }
+
+    fn bench_name_iterated(self) -> &'static str {
+        match self {
+            Kind::Spike => "robust-iter-spike",
+            Kind::Rail => "robust-iter-rail",
+            Kind::Zero => "robust-iter-zero",
+            Kind::Stuck => "robust-iter-stuck",
+            Kind::Displace03 => "robust-iter-displace-0.3",
+            Kind::Displace1 => "robust-iter-displace-1",
+            Kind::Patch => "robust-iter-patch",
+        }
+    }
+
+    /// Contaminates `fraction` of the rows of `rows`.
+    fn apply(self, rows: &mut [[i16; 3]], fraction: f64, seed: u64) {
+        let mut rng = SplitMix64::new(seed);
+        let n = rows.len();
+        let k = (n as f64 * fraction) as usize;
+        let field = 320.0;
+        let mut unit = |rng: &mut SplitMix64| {
+            // A direction from three uniforms (not uniform on the sphere; a
+            // displacement direction needs no more).
+            let v = [
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            ];
+            let norm = libm::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).max(1e-9);
+            v.map(|c| c / norm)
+        };
+        let displaced = |row: [i16; 3], d: [f64; 3], size: f64| {
+            let mut out = row;
+            for (o, (r, c)) in out.iter_mut().zip(row.iter().zip(d)) {
+                *o = (f64::from(*r) + size * field * c).clamp(-32000.0, 32000.0) as i16;
+            }
+            out
+        };
+        match self {
+            Kind::Patch => {
+                let d = unit(&mut rng);
+                let start = (rng.next_u64() % (n - k) as u64) as usize;
+                for row in rows[start..start + k].iter_mut() {
+                    *row = displaced(*row, d, 0.3);
+                }
+            }
+            Kind::Stuck => {
+                let mut i = 0;
+                let mut done = 0;
+                while done < k && i + 11 < n {
+                    i += 11 + (rng.next_u64() % 80) as usize;
+                    let source = rows[(i - 11).min(n - 1)];
+                    for row in rows[(i - 10).min(n)..i.min(n)].iter_mut() {
+                        *row = source;
+                        done += 1;
+                    }
+                }
+            }
+            _ => {
+                for _ in 0..k {
+                    let i = (rng.next_u64() % n as u64) as usize;
+                    let row = rows[i];
+                    rows[i] = match self {
+                        Kind::Spike => [0, 1, 2].map(|_| (rng.next_u64() % 60000) as i16 - 30000),
+                        Kind::Rail => {
+                            let mut r = row;
+                            r[(rng.next_u64() % 3) as usize] = i16::MAX;
+                            r
+                        }
+                        Kind::Zero => [0; 3],
+                        Kind::Displace03 => displaced(row, unit(&mut rng), 0.3),
+                        _ => displaced(row, unit(&mut rng), 1.0),
+                    };
+                }
+            }
+        }
+    }
+}
+
 fn config(method: Method) -> Config {
     Config {
         method,
@@ -233,7 +353,12 @@ fn stage<R>(timer: &Timer, name: &str, reps: u32, f: impl FnMut() -> R) -> u64 {
 
 /// One whole calibration; `None` (and an error line) when it fails.
 fn calibration(timer: &Timer, name: &str, samples: &[[i16; 3]], method: Method) -> Option<u64> {
-    let cfg = config(method);
+    calibration_with(timer, name, samples, &config(method))
+}
+
+/// [`calibration`] with a given configuration.
+fn calibration_with(timer: &Timer, name: &str, samples: &[[i16; 3]], cfg: &Config) -> Option<u64> {
+    let cfg = *cfg;
     let mut result = None;
     let count = timer.instructions(1, || {
         result = Some(calibrate::<f32, [i16; 3]>(
@@ -244,13 +369,20 @@ fn calibration(timer: &Timer, name: &str, samples: &[[i16; 3]], method: Method) 
     match result {
         Some(Ok(fit)) => {
             report(name, samples.len(), count);
+            let r = &fit.report;
             println!(
-                "# {=str} n={=usize}: iterations={=u32} passes={=u32} radial_rms={=f32}",
+                "# {=str} n={=usize}: iterations={=u32} passes={=u32} robust_passes={=u32} dropped={=usize} screened={=usize} rejected={=usize} radial_rms={=f32} fit_error={=f32} lack_of_fit={=f32}",
                 name,
                 samples.len(),
-                fit.report.iterations,
-                fit.report.passes,
-                fit.report.radial_rms
+                r.iterations,
+                r.passes,
+                r.robust_passes,
+                r.samples_dropped,
+                r.screened,
+                r.rejected,
+                r.radial_rms,
+                r.quality.fit_error,
+                r.quality.lack_of_fit
             );
             Some(count)
         }
@@ -311,6 +443,26 @@ fn main() -> ! {
         if method == Method::Adc2 {
             adc2_total = r;
         }
+    }
+
+    // The plain pipeline (outlier handling off): the estimates of the paper's
+    // methods, as before outlier handling existed.
+    let plain = Config {
+        robust: false,
+        ..config(Method::Adc2)
+    };
+    ok &= calibration_with(&timer, "adc2-plain", samples, &plain).is_some();
+
+    // Contaminated copies of the same samples: 10 % of the rows of each kind
+    // (design document, section 14), robust LS9 + ADC2 (the default).
+    let dirty = cortex_m::singleton!(: [[i16; 3]; N] = [[0; 3]; N]).expect("taken once");
+    for kind in Kind::ALL {
+        dirty.copy_from_slice(samples);
+        kind.apply(dirty, 0.10, 7);
+        let name = kind.bench_name();
+        ok &= calibration_with(&timer, name, dirty, &config(Method::Adc2)).is_some();
+        let iterated = config(Method::Adc2Iterated);
+        ok &= calibration_with(&timer, kind.bench_name_iterated(), dirty, &iterated).is_some();
     }
 
     // Stages of LS9 + ADC2.
