@@ -1,11 +1,11 @@
 //! The contamination generator (`host_tests::contamination`) does what it
 //! says, and a small study runs end to end.
 //!
-//! The study test asserts only what holds for the library as it stands
-//! (clean data are accepted and fitted well, every run is accounted for);
-//! it does not assert the robustness targets of the design document's
-//! section 14, which the current core misses. It prints the table of plain
-//! ADC2 at 1 % and 10 % contamination (`-- --nocapture` to see it).
+//! The study test asserts that the study itself works (clean data are
+//! accepted and fitted well, every run is accounted for); the robustness
+//! targets of the design document's section 14 are `tests/robust.rs`'s. It
+//! prints the table at 1 % and 10 % contamination (`-- --nocapture` to see
+//! it).
 
 use host_tests::contamination::{
     contaminate, degenerate, fit_errors, order_along_path, render_table, rows_for, run_study,

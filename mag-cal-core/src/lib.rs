@@ -275,9 +275,6 @@ fn pipeline<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples, config.robust)?;
-    if config.robust && scan.drops.glitches() > 0 {
-        return robust_path(samples, config, &scan, ls_solve, step);
-    }
     match plain_path(samples, config, &scan, ls_solve, step) {
         Ok((fit, clean)) if clean || !config.robust => Ok(fit),
         Err(e) if !config.robust => Err(e),
@@ -305,7 +302,16 @@ fn plain_path<T: Real, S: Sample>(
 ) -> Result<(Fit<T>, bool), Error> {
     let norm = scan.norm;
     let mut figures = Figures::new(scan, config, false);
-    let moments = moments::Moments::accumulate(samples, &norm);
+    // The rows the rules dropped stay out; without drops the plain loops run.
+    let gate = if scan.drops.glitches() == 0 {
+        rules::Gate::PLAIN
+    } else {
+        rules::Gate {
+            rules: scan.rules,
+            screen: None,
+        }
+    };
+    let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None).0;
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
         // Gross outliers: not worth a plain fit (the caller screens).
         return Err(Error::OutOfRange);
@@ -320,7 +326,7 @@ fn plain_path<T: Real, S: Sample>(
     let start = Start {
         norm,
         ls,
-        weights: methods::Weights::PLAIN,
+        weights: methods::Weights { gate, sigma: None },
         robust_passes: 0,
         screen: None,
     };
