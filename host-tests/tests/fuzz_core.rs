@@ -61,7 +61,7 @@ use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, wrap_deg,
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{
     calibrate, persist, Calibration, Config, Error, Fit, LsVariant, Method, Real, Sample,
-    SampleStore, MIN_SAMPLES,
+    SampleStore, Thresholds, MIN_SAMPLES,
 };
 
 const DEFAULT_SEED: u64 = 0x6d61_6763_616c_0001;
@@ -452,6 +452,8 @@ fn config(method: Method, ls: LsVariant, extras: &Extras) -> Config {
         pass_tolerance: extras.pass_tolerance,
         noise_covariance: extras.noise_covariance,
         expected_field_strength: extras.expected_field_strength,
+        robust: extras.robust,
+        thresholds: extras.thresholds,
         ..Config::default()
     }
 }
@@ -464,6 +466,42 @@ struct Extras {
     pass_tolerance: Option<f64>,
     noise_covariance: Option<[[f64; 3]; 3]>,
     expected_field_strength: Option<f64>,
+    /// Outlier handling (on in 80 % of the cases).
+    robust: bool,
+    /// Judging limits: the defaults, or any numbers (NaN, 0, infinite).
+    thresholds: Thresholds,
+}
+
+/// Judging limits for a case: each the default or, in turn, any number.
+fn thresholds(rng: &mut Rng) -> Thresholds {
+    let d = Thresholds::DEFAULT;
+    if rng.chance(0.7) {
+        return d;
+    }
+    let mut any = |v: f32| {
+        if rng.chance(0.7) {
+            v
+        } else {
+            rng.any_f64() as f32
+        }
+    };
+    Thresholds {
+        warn_samples: d.warn_samples,
+        refuse_flatness: any(d.refuse_flatness),
+        warn_flatness: any(d.warn_flatness),
+        refuse_quadric_gap: any(d.refuse_quadric_gap),
+        gap_noise_limit: any(d.gap_noise_limit),
+        warn_quadric_gap: any(d.warn_quadric_gap),
+        refuse_distortion: any(d.refuse_distortion),
+        refuse_coverage: any(d.refuse_coverage),
+        warn_gram_condition: any(d.warn_gram_condition),
+        refuse_field_deviation: any(d.refuse_field_deviation),
+        warn_spread_over_noise: any(d.warn_spread_over_noise),
+        refuse_fit_error: any(d.refuse_fit_error),
+        warn_fit_error: any(d.warn_fit_error),
+        refuse_outlier_share: any(d.refuse_outlier_share),
+        refuse_lack_of_fit: any(d.refuse_lack_of_fit),
+    }
 }
 
 fn extras(rng: &mut Rng) -> Extras {
@@ -475,6 +513,8 @@ fn extras(rng: &mut Rng) -> Extras {
             pass_tolerance: d.pass_tolerance,
             noise_covariance: d.noise_covariance,
             expected_field_strength: d.expected_field_strength,
+            robust: rng.chance(0.8),
+            thresholds: d.thresholds,
         };
     }
     // Caps from 0 up to 1000. (A cap of `u32::MAX` with a pass tolerance
@@ -505,6 +545,8 @@ fn extras(rng: &mut Rng) -> Extras {
                 rng.any_f64()
             }
         }),
+        robust: rng.chance(0.8),
+        thresholds: thresholds(rng),
     }
 }
 

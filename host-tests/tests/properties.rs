@@ -73,6 +73,9 @@ fn li_griffiths_representable(m: &Matrix3<f64>) -> bool {
     4.0 * j - i * i > 0.0
 }
 
+/// The calibrations of a pair of inputs.
+type Pair = (Calibration<f64>, Calibration<f64>);
+
 /// The two fits of a transformed pair: both refused for the same reason
 /// (`None`), or both calibrated. Li and Griffiths' fit of an ellipsoid it
 /// cannot represent is wrong, and the fit error refuses it: in both frames.
@@ -80,7 +83,7 @@ fn pair(
     label: &str,
     a: Result<Fit<f64>, Error>,
     c: Result<Fit<f64>, Error>,
-) -> Result<Option<(Calibration<f64>, Calibration<f64>)>, TestCaseError> {
+) -> Result<Option<Pair>, TestCaseError> {
     match (a, c) {
         (Ok(a), Ok(c)) => Ok(Some((a.calibration, c.calibration))),
         (Err(a), Err(c)) if core::mem::discriminant(&a) == core::mem::discriminant(&c) => {

@@ -12,11 +12,16 @@
 //!
 //! | step | module | what |
 //! |---|---|---|
-//! | 0 | [`normalize`] | centre and scale the samples (section 2) |
+//! | 0 | [`rules`], [`normalize`] | drop rows by rule; centre and scale the samples (section 2) |
 //! | 1 | [`moments`], [`ellipsoid`] | algebraic LS ellipsoid fit from 35 moments, one pass (section 3) |
 //! | 2-3 | [`artificial`] | unit "artificial" field vectors `h_i` and sufficient statistics, second pass (section 4) |
 //! | 4 | [`quasi_newton`], [`methods`] | ADC2: re-estimate `T`, `b` by BFGS on those statistics (section 5) |
 //! | 5 | [`calibration`] | canonical result, [`Calibration::apply`] |
+//! | judging | [`quality`] | the figures of a fit, turned into warnings or a refusal in one place |
+//!
+//! On contaminated data ([`Config::robust`], on by default) steps 0-4 are
+//! preceded or weighted by [`screen`] and [`robust`] (see
+//! [Outliers](#outliers)).
 //!
 //! Everything runs in `f32` or `f64` through one generic code path
 //! ([`Real`]), on the stack, in two passes over the samples (plus one for
@@ -53,7 +58,38 @@
 //!
 //! # Features
 //! - `defmt`: derive `defmt::Format` for [`Error`], [`Method`], [`LsVariant`],
-//!   [`Warning`], [`Warnings`] and the collector's `Offer` and `Progress`.
+//!   [`Warning`], [`Warnings`], [`Drops`], [`Rule`], [`SampleClass`],
+//!   [`Thresholds`] and the collector's `Offer` and `Progress`.
+//!
+//! # Outliers
+//!
+//! Real logs hold rows that are not on the ellipsoid: bus glitches (wild
+//! values, exact zeros, a saturated axis), a stuck sensor (repeated rows),
+//! a magnet or a motor current displacing a stretch of the trajectory. With
+//! [`Config::robust`] (the default) the fit:
+//!
+//! 1. drops rows by rule ([`rules`]: non-finite, too large for the working
+//!    precision, `(0, 0, 0)`, on the integer rails, equal to the row
+//!    before, at a clip level), and counts them by rule ([`Drops`]);
+//! 2. fits plainly, and keeps that fit when no residual exceeds
+//!    [`CLEAN_LIMIT`] robust standard deviations and nothing misfits (clean
+//!    data pay one extra pass's worth of figures, no robust pass);
+//! 3. otherwise screens the rows far from a coordinate-wise median centre,
+//!    starts from the crude sphere (median centre, median distance), and
+//!    refits LS with 0/1 weights on the residual (at
+//!    [`methods::OUTLIER_CUT`]` = 3.5` robust standard deviations
+//!    `1.4826 median|r|`, from fixed histograms: no sorting, nothing stored
+//!    per sample), then runs the method with the same weights.
+//!
+//! The report says what happened ([`Report::drops`], [`Report::screened`],
+//! [`Report::rejected`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
+//! and [`Selection::classify`] tells, row by row, which rows the fit used.
+//! Three refusals are added: [`Error::NoSphere`] (a device that lay still,
+//! a filled cloud: fit error above 0.2 of the field),
+//! [`Error::TooManyOutliers`] (more than a quarter of the rows left out) and
+//! [`Error::SystematicMisfit`] (a region of directions sits off the
+//! ellipsoid by more than 1 % of the field). The limits are
+//! [`Config::thresholds`].
 //!
 //! Beyond ADC2, [`Method`] offers the paper's ADC1 (whose minimiser equals
 //! ADC2's, see [`methods::adc1`]) and subMLE baseline, and iterated ADC2,
@@ -62,6 +98,8 @@
 //! # Not supported
 //! Online (recursive) estimation: every method runs on a stored batch.
 //! Temperature compensation, and sensor models beyond `y = T h + b + e`.
+//! Outlier handling for subMLE beyond the drop rules and the screening (its
+//! cost changes with the weights between its own cost evaluations).
 
 #![no_std]
 #![forbid(unsafe_code)]

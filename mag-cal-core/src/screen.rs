@@ -4,11 +4,11 @@
 //! Before any fit sees them, samples far from the cloud are screened out:
 //!
 //! 1. a coordinate-wise median centre `c`, from nested histograms per axis
-//!    ([`AxisHistograms`]): each pass narrows every axis's window to the
+//!    (nested linear histograms): each pass narrows every axis's window to the
 //!    bins holding its middle half, until that half spans at least
 //!    [`RESOLVED_BINS`] bins (2 passes on data without wild values, 3-4
 //!    with values 100 times the field away);
-//! 2. the median distance `m = median |y - c|` (one pass, [`LogHistogram`]);
+//! 2. the median distance `m = median |y - c|` (one pass, a logarithmic histogram);
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
 //!    of the samples kept, giving the band around the sphere that holds
