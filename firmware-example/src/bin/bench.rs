@@ -274,7 +274,7 @@ impl Kind {
         let n = rows.len();
         let k = (n as f64 * fraction) as usize;
         let field = 320.0;
-        let mut unit = |rng: &mut SplitMix64| {
+        let unit = |rng: &mut SplitMix64| {
             // A direction from three uniforms (not uniform on the sphere; a
             // displacement direction needs no more).
             let v = [
