@@ -1,23 +1,25 @@
 //! The `apply` subcommand: a calibration from `fit --format json`, applied
 //! to every row of a file, with tilt-compensated headings when the file
-//! has accelerometer columns.
+//! has accelerometer columns, and with `--flags` what the fit did with
+//! each row.
 
 use std::io::{BufWriter, Write};
 
 use mag_cal_core::heading::{tilt_compensated_heading_deg, HeadingSmoother};
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
-use mag_cal_core::Calibration;
+use mag_cal_core::{Calibration, Real, SampleClass};
 use serde_json::Value;
 
-use crate::cli::{ApplyArgs, MAX_WINDOW};
+use crate::cli::{ApplyArgs, Precision, MAX_WINDOW};
 use crate::error::{one_line, CliError};
 use crate::input::{self, Accel, Picked, Source};
+use crate::selection::{class_name, SelectionJson};
 
 /// Runs `magcal apply`, writing the CSV to `out`.
 ///
-/// Returns a note for stderr when the sample columns were found in the
-/// header.
-pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Option<String>, CliError> {
+/// Returns notes for stderr: when the sample columns were found in the
+/// header, and when `--flags` found no `selection` in the calibration.
+pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
     let cal_source = Source::from_arg(&args.calibration);
     let source = Source::from_arg(&args.file);
     if cal_source == Source::Stdin && source == Source::Stdin {
@@ -25,7 +27,23 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Option<String>, CliE
             "CAL.json and FILE cannot both be '-' (stdin)".into(),
         ));
     }
-    let cal = calibration_from_json(&cal_source.read()?, &cal_source.name())?;
+    let cal_name = cal_source.name();
+    let cal_json = read_json(&cal_source.read()?, &cal_name)?;
+    let cal = calibration_from_value(&cal_json, &cal_name)?;
+    let mut notes = Vec::new();
+    let flags = if args.flags {
+        let flags = RowFlags::from_value(&cal_json, &cal_name)?;
+        if flags.legacy {
+            notes.push(format!(
+                "{} has no 'selection' (written before outlier handling): \
+                 --flags marks every finite row used",
+                one_line(&cal_name)
+            ));
+        }
+        Some(flags)
+    } else {
+        None
+    };
     let accel = match &args.accel_columns {
         Some(columns) => Accel::Named(columns),
         None => Accel::Detect,
@@ -39,14 +57,19 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Option<String>, CliE
     let write = |out: &mut BufWriter<&mut dyn Write>, line: &str| {
         out.write_all(line.as_bytes()).map_err(CliError::Write)
     };
-    write(
-        &mut out,
-        if table.accel.is_some() {
-            "x,y,z,heading_deg,heading_smoothed_deg\n"
-        } else {
-            "x,y,z\n"
-        },
-    )?;
+    let classes = match &flags {
+        Some(flags) => Some(flags.classify(&table.samples, &cal_name)?),
+        None => None,
+    };
+    let mut header = String::from("x,y,z");
+    if table.accel.is_some() {
+        header.push_str(",heading_deg,heading_smoothed_deg");
+    }
+    if classes.is_some() {
+        header.push_str(",used,class");
+    }
+    header.push('\n');
+    write(&mut out, &header)?;
     let mut line = String::new();
     for (row, raw) in table.samples.iter().enumerate() {
         let u = cal.apply(*raw);
@@ -70,11 +93,85 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Option<String>, CliE
             .filter(|h| h.is_finite());
             line.push_str(&format!(",{},{}", optional(heading), optional(smoothed)));
         }
+        if let Some(class) = classes.as_ref().and_then(|c| c.get(row)) {
+            let used = u8::from(*class == SampleClass::Used);
+            line.push_str(&format!(",{used},{}", class_name(*class)));
+        }
         line.push('\n');
         write(&mut out, &line)?;
     }
     out.flush().map_err(CliError::Write)?;
-    Ok((table.columns.picked == Picked::Header).then(|| format!("columns {}", table.columns)))
+    if table.columns.picked == Picked::Header {
+        notes.insert(0, format!("columns {}", table.columns));
+    }
+    Ok(notes)
+}
+
+/// What `--flags` needs from the calibration file: the fit's selection,
+/// precision and parameters.
+#[derive(Clone, Debug, PartialEq)]
+struct RowFlags {
+    selection: SelectionJson,
+    precision: Precision,
+    hard_iron: [f64; 3],
+    soft_iron: [[f64; 3]; 3],
+    /// The file has no `selection` (an older file): [`SelectionJson::ALL`].
+    legacy: bool,
+}
+
+impl RowFlags {
+    /// Reads the `selection` and `precision` of a fit JSON whose
+    /// calibration [`calibration_from_value`] accepted.
+    fn from_value(value: &Value, name: &str) -> Result<Self, CliError> {
+        let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
+        let (selection, legacy) = match value.get("selection") {
+            None => (SelectionJson::ALL, true),
+            Some(v) => (SelectionJson::from_json(v).map_err(bad)?, false),
+        };
+        let precision = match value.get("precision") {
+            None => Precision::F64,
+            Some(v) => match v.as_str() {
+                Some("f64") => Precision::F64,
+                Some("f32") => Precision::F32,
+                _ => return Err(bad("'precision' must be \"f32\" or \"f64\"".into())),
+            },
+        };
+        let (hard_iron, soft_iron) = parameters(value).map_err(bad)?;
+        Ok(Self {
+            selection,
+            precision,
+            hard_iron,
+            soft_iron,
+            legacy,
+        })
+    }
+
+    /// The class of every row, computed as the fit did: the core's
+    /// [`mag_cal_core::Selection::classify`] in the fit's precision.
+    fn classify(&self, samples: &[[f64; 3]], name: &str) -> Result<Vec<SampleClass>, CliError> {
+        match self.precision {
+            Precision::F32 => self.classify_in::<f32>(samples, name),
+            Precision::F64 => self.classify_in::<f64>(samples, name),
+        }
+    }
+
+    fn classify_in<T: Real>(
+        &self,
+        samples: &[[f64; 3]],
+        name: &str,
+    ) -> Result<Vec<SampleClass>, CliError> {
+        let b = Vector3::from(self.hard_iron.map(T::lit));
+        let w = Matrix3::from_fn(|r, c| T::lit(self.soft_iron[r][c]));
+        let cal = Calibration::new(b, w).map_err(|err| {
+            CliError::Input(format!(
+                "{}: hard_iron and soft_iron are not a calibration in {}: {err}",
+                one_line(name),
+                self.precision.name()
+            ))
+        })?;
+        let selection = self.selection.to_core::<T>();
+        Ok(selection.classify(&cal, samples).collect())
+    }
 }
 
 /// A CSV field: the shortest round-trip form, `nan` for non-finite values.
@@ -91,12 +188,9 @@ fn optional(v: Option<f64>) -> String {
     v.map(number).unwrap_or_default()
 }
 
-/// Rebuilds the calibration from the JSON object of `fit --format json`:
-/// its `hard_iron` (3 numbers) and `soft_iron` (3 rows of 3 numbers);
-/// other fields are ignored.
-pub fn calibration_from_json(bytes: &[u8], name: &str) -> Result<Calibration<f64>, CliError> {
-    let name = one_line(name);
-    let bad = |what: String| CliError::Input(format!("{name}: {what}"));
+/// Parses a calibration file: the JSON object of `fit --format json`.
+fn read_json(bytes: &[u8], name: &str) -> Result<Value, CliError> {
+    let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
     let value: Value = serde_json::from_slice(bytes)
         .map_err(|err| bad(format!("not a calibration (invalid JSON: {err})")))?;
     if !value.is_object() {
@@ -104,27 +198,42 @@ pub fn calibration_from_json(bytes: &[u8], name: &str) -> Result<Calibration<f64
             "not a calibration (expected the JSON object of 'magcal fit --format json')".into(),
         ));
     }
-    let field = |key: &str| {
-        value
-            .get(key)
-            .ok_or_else(|| bad(format!("missing field '{key}'")))
-    };
+    Ok(value)
+}
+
+/// The `hard_iron` (3 numbers) and `soft_iron` (3 rows of 3 numbers) of a
+/// fit JSON object, or what is wrong with them.
+fn parameters(value: &Value) -> Result<([f64; 3], [[f64; 3]; 3]), String> {
+    let field = |key: &str| value.get(key).ok_or(format!("missing field '{key}'"));
     let row = |v: &Value| -> Option<[f64; 3]> {
         let a = v.as_array().filter(|a| a.len() == 3)?;
         Some([a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?])
     };
-    let b = row(field("hard_iron")?)
-        .ok_or_else(|| bad("'hard_iron' must be an array of 3 numbers".into()))?;
+    let b = row(field("hard_iron")?).ok_or("'hard_iron' must be an array of 3 numbers")?;
     let w = field("soft_iron")?
         .as_array()
         .filter(|rows| rows.len() == 3)
         .and_then(|rows| Some([row(&rows[0])?, row(&rows[1])?, row(&rows[2])?]))
-        .ok_or_else(|| bad("'soft_iron' must be 3 rows of 3 numbers".into()))?;
+        .ok_or("'soft_iron' must be 3 rows of 3 numbers")?;
+    Ok((b, w))
+}
+
+/// Rebuilds the calibration from the JSON object of `fit --format json`:
+/// its `hard_iron` and `soft_iron`; other fields are ignored.
+fn calibration_from_value(value: &Value, name: &str) -> Result<Calibration<f64>, CliError> {
+    let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
+    let (b, w) = parameters(value).map_err(bad)?;
     Calibration::new(Vector3::from(b), Matrix3::from_fn(|r, c| w[r][c])).map_err(|err| {
         bad(format!(
             "hard_iron and soft_iron are not a calibration: {err}"
         ))
     })
+}
+
+/// [`calibration_from_value`] on the bytes of a calibration file.
+#[cfg(test)]
+fn calibration_from_json(bytes: &[u8], name: &str) -> Result<Calibration<f64>, CliError> {
+    calibration_from_value(&read_json(bytes, name)?, name)
 }
 
 #[cfg(test)]
@@ -182,6 +291,47 @@ mod tests {
             assert_eq!(msg.lines().count(), 1, "{msg}");
             assert_eq!(err.exit_code(), 2);
         }
+    }
+
+    #[test]
+    fn flags_read_the_selection_in_the_fit_precision() {
+        let v: Value = serde_json::from_str(CAL).expect("json");
+        // No selection: every finite row used, and the file is marked old.
+        let flags = RowFlags::from_value(&v, "c.json").expect("reads");
+        assert!(flags.legacy && flags.selection == SelectionJson::ALL);
+        assert_eq!(flags.precision, Precision::F64);
+        let rows = [[12.0, 0.0, 0.0], [f64::NAN, 0.0, 0.0], [14.0, 0.0, 0.0]];
+        let classes = flags.classify(&rows, "c.json").expect("classifies");
+        assert_eq!(
+            classes,
+            [
+                SampleClass::Used,
+                SampleClass::Dropped(mag_cal_core::Rule::NonFinite),
+                SampleClass::Used
+            ]
+        );
+        // A residual limit: |u| = 2 for the last row, residual 1.
+        let mut v = v;
+        v["precision"] = "f32".into();
+        v["selection"] = serde_json::json!({
+            "glitch_rules": true,
+            "clip_levels": [[null, null], [null, null], [null, null]],
+            "screen": null,
+            "residual_limit": 0.5
+        });
+        let flags = RowFlags::from_value(&v, "c.json").expect("reads");
+        assert!(!flags.legacy);
+        assert_eq!(flags.precision, Precision::F32);
+        let classes = flags.classify(&rows, "c.json").expect("classifies");
+        assert_eq!(classes[2], SampleClass::Rejected);
+        // 1e39 is finite in f64, not in f32: the f32 rules drop it.
+        let big = flags
+            .classify(&[[1e39, 0.0, 0.0]], "c.json")
+            .expect("classifies");
+        assert_eq!(big, [SampleClass::Dropped(mag_cal_core::Rule::NonFinite)]);
+        v["precision"] = 32.into();
+        let err = RowFlags::from_value(&v, "c.json").unwrap_err().to_string();
+        assert!(err.starts_with("c.json: 'precision' must be"), "{err}");
     }
 
     #[test]

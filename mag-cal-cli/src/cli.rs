@@ -28,6 +28,16 @@ are ignored; names containing 'cal' are calibrated columns, never picked).
 No such triple, several, or no header: exit 2, listing the header's columns.
 'nan' and 'inf' are accepted and skipped by the fit (counted as dropped).
 
+Outliers (unless --plain): rows that are not finite or too large are dropped,
+and so are glitches: exact (0, 0, 0) rows, rows equal to the row before, and
+rows at an axis's clip level (an extreme value many rows share). A plain fit
+of the rest is kept when it is clean (no residual beyond 5 robust standard
+deviations, no systematic misfit); otherwise rows farther than 2.5 median
+distances from the median centre are screened out, and rows whose calibrated
+norm is off the unit sphere by more than 3.5 robust standard deviations are
+rejected. The report counts every row once (used + dropped + screened +
+rejected = rows); the JSON's 'selection' lets 'magcal apply --flags' mark them.
+
 Exit status: 0 success, 2 usage, I/O or parse error, 3 calibration refused.";
 
 /// Calibrate a three-axis magnetometer from a recorded log.
@@ -97,15 +107,24 @@ pub struct FitArgs {
     pub noise_std: Option<NoiseStd>,
 
     /// Also draw the samples before and after calibration into an SVG file
+    /// (rows the fit did not use marked as red crosses)
     #[arg(long, value_name = "OUT.svg")]
     pub plot: Option<PathBuf>,
+
+    /// Outlier handling off: trust every finite row, the paper's plain
+    /// methods (no glitch rules, screening or residual rejection; rows too
+    /// large for the precision are still dropped, and data that lie on no
+    /// sphere are still refused)
+    #[arg(long)]
+    pub plain: bool,
 }
 
 /// Text after the help of `magcal apply`.
 const APPLY_AFTER_HELP: &str = "\
-CAL.json is what 'magcal fit --format json' prints; only its hard_iron and
-soft_iron are read. FILE is read as by 'magcal fit', by the same rule for its
-x, y, z columns (see 'magcal fit --help').
+CAL.json is what 'magcal fit --format json' prints; its hard_iron and
+soft_iron are read (with --flags also its selection and precision). FILE is
+read as by 'magcal fit', by the same rule for its x, y, z columns (see
+'magcal fit --help').
 
 Output: CSV on stdout, header 'x,y,z', then one calibrated sample per input
 row: W (raw - b) on the unit sphere, or with --scaled times the field strength
@@ -119,6 +138,14 @@ reading is the specific force at rest (pointing up; its unit does not matter).
 The calibrated frame is the canonical one (symmetric W), not aligned to the
 accelerometer's axes: for headings the two sensors must share right-handed
 axes. Rows with non-finite values give 'nan' coordinates and an empty heading.
+
+--flags adds two last columns: used (1 or 0) and class (used, dropped:RULE with
+RULE one of non_finite, overflow, zero, rails, repeated, clipped; screened;
+rejected), what the fit did with each row by the rules and limits of CAL.json's
+'selection' applied to FILE, in the fit's precision. For the file that was
+fitted, exactly samples_used rows are marked used (up to rounding at the
+limit). A CAL.json without 'selection' (written before outlier handling)
+marks every finite row used, and a note on stderr says so.
 
 Exit status: 0 success, 2 usage, I/O, parse or calibration-file error.";
 
@@ -159,6 +186,11 @@ pub struct ApplyArgs {
     /// Print in sensor units (times the field strength), not on the unit sphere
     #[arg(long)]
     pub scaled: bool,
+
+    /// Add the columns used (1/0) and class (used, dropped:RULE, screened,
+    /// rejected): what the fit did with each row
+    #[arg(long)]
+    pub flags: bool,
 }
 
 /// The core's default smoothing window, as a `--window` value.
@@ -348,6 +380,25 @@ mod tests {
     }
 
     #[test]
+    fn the_outlier_help_quotes_the_core_constants() {
+        for (value, words) in [
+            (mag_cal_core::CLEAN_LIMIT, "beyond {} robust standard"),
+            (
+                mag_cal_core::screen::SCREEN_RADIUS,
+                "farther than {} median",
+            ),
+            (
+                mag_cal_core::methods::OUTLIER_CUT,
+                "by more than {} robust standard",
+            ),
+        ] {
+            let phrase = words.replace("{}", &value.to_string());
+            let help = AFTER_HELP.split_whitespace().collect::<Vec<_>>().join(" ");
+            assert!(help.contains(&phrase), "{phrase}");
+        }
+    }
+
+    #[test]
     fn columns_need_three_names() {
         assert_eq!(
             parse_columns(" magx, magy ,magz"),
@@ -371,6 +422,7 @@ mod tests {
         assert_eq!(args.columns, None);
         assert_eq!(args.noise_std, None);
         assert_eq!(args.plot, None);
+        assert!(!args.plain);
 
         let cli = Cli::try_parse_from(["magcal", "apply", "c.json", "x.csv"]).expect("parses");
         let Command::Apply(args) = cli.command else {
@@ -380,7 +432,7 @@ mod tests {
             usize::from(args.window),
             mag_cal_core::heading::DEFAULT_WINDOW
         );
-        assert!(!args.scaled && args.accel_columns.is_none());
+        assert!(!args.scaled && !args.flags && args.accel_columns.is_none());
     }
 
     #[test]

@@ -4,13 +4,14 @@ use std::io::Write;
 use std::time::Instant;
 
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
-use mag_cal_core::{calibrate, Calibration, Config, Method, Real};
+use mag_cal_core::{calibrate, Calibration, Config, Method, Real, SampleClass};
 use serde::Serialize;
 
 use crate::cli::{FitArgs, Format, NoiseStd, Precision};
 use crate::error::CliError;
 use crate::input::{self, Picked, Source};
 use crate::output;
+use crate::selection::{DropCounts, SelectionJson};
 use crate::svg::{self, PlotTitle};
 
 /// The result of a fit, widened to `f64`: what both output formats print.
@@ -24,10 +25,18 @@ pub struct Outcome {
     pub ls: &'static str,
     /// `f32` or `f64`.
     pub precision: &'static str,
-    /// Finite samples the fit used.
+    /// Outlier handling was on (`false` with `--plain`).
+    pub robust: bool,
+    /// Rows the final fit used.
     pub samples_used: usize,
-    /// Non-finite samples it skipped.
+    /// Rows dropped by the rules before any fit, all rules together.
     pub samples_dropped: usize,
+    /// Rows dropped by each rule (by [`mag_cal_core::Rule::name`]).
+    pub drops: DropCounts,
+    /// Rows kept by the rules but screened out (too far from the others).
+    pub screened: usize,
+    /// Rows inside the screening rejected by their radial residual.
+    pub rejected: usize,
     /// Hard-iron offset `b`, sensor units.
     pub hard_iron: [f64; 3],
     /// Soft-iron matrix `W`, rows; symmetric; `W (raw - b)` is on the unit
@@ -41,10 +50,20 @@ pub struct Outcome {
     /// and `adc2`, one per step for `adc2-iter`, one per cost evaluation
     /// for `submle`).
     pub passes: u32,
+    /// Passes of the outlier handling over the samples: screening and
+    /// robust LS refits (0 when the plain fit was clean, and with `--plain`).
+    pub robust_passes: u32,
     /// Wall time of the `calibrate` call alone, microseconds.
     pub timing_us: f64,
     /// How well the calibration fits the samples.
     pub quality: Quality,
+    /// Which rows the fit used: what `apply --flags` needs to classify
+    /// rows again.
+    pub selection: SelectionJson,
+    /// What the fit did with each input row (in input order; for the plot,
+    /// not in the JSON).
+    #[serde(skip)]
+    pub classes: Vec<SampleClass>,
 }
 
 /// Quality figures of a fit.
@@ -52,7 +71,7 @@ pub struct Outcome {
 pub struct Quality {
     /// RMS of `|W (y - b)| - 1` over the samples used (from the core).
     pub radial_rms: f64,
-    /// Standard deviation over mean of `|W (y - b)|` over the samples used.
+    /// Standard deviation over mean of `|W (y - b)|` over the rows used.
     pub norm_spread: f64,
     /// Flatness of the samples (`lambda_min / lambda_max` of their
     /// covariance; refused below 0.03).
@@ -66,6 +85,17 @@ pub struct Quality {
     pub coverage: f64,
     /// Condition number of the directions' Gram matrix (warned above 20).
     pub gram_condition: f64,
+    /// Fit error: robust standard deviation of `|W (y - b)| - 1` over the
+    /// rows kept by the rules and the screening, in units of the field
+    /// (warned above 0.05, refused above 0.2).
+    pub fit_error: f64,
+    /// Lack of fit: the systematic part of the radial residual over
+    /// direction cells, in units of the field (refused above 0.01 when
+    /// significant).
+    pub lack_of_fit: f64,
+    /// Share of the rows kept by the rules that the fit did not use
+    /// (screened or rejected; refused above 0.25).
+    pub outlier_share: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
 }
@@ -74,7 +104,7 @@ pub struct Quality {
 ///
 /// Returns a note for stderr when the sample columns were found in the
 /// header and the report does not say so (`--format json`).
-pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Option<String>, CliError> {
+pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
     let source = Source::from_arg(&args.file);
     let bytes = source.read()?;
     let method = args.method.to_core();
@@ -90,6 +120,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Option<String>, CliErr
         method,
         ls: args.ls.to_core(),
         noise_covariance: args.noise_std.map(NoiseStd::covariance),
+        robust: !args.plain,
         ..Config::default()
     };
     let outcome = fit(&samples, &config, args.precision)?;
@@ -100,8 +131,11 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Option<String>, CliErr
             method: outcome.method,
             ls: outcome.ls,
             radial_rms: outcome.quality.radial_rms,
+            fit_error: outcome.quality.fit_error,
+            residual_limit: outcome.selection.residual_limit,
+            robust: outcome.robust,
         };
-        let picture = svg::plot(&samples, &outcome.calibration()?, &title);
+        let picture = svg::plot(&samples, &outcome.classes, &outcome.calibration()?, &title);
         std::fs::write(path, picture).map_err(|err| CliError::WriteFile {
             path: path.display().to_string(),
             err,
@@ -116,7 +150,9 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Option<String>, CliErr
         .map_err(CliError::Write)?;
     Ok(
         (args.format == Format::Json && table.columns.picked == Picked::Header)
-            .then(|| format!("columns {}", table.columns)),
+            .then(|| format!("columns {}", table.columns))
+            .into_iter()
+            .collect(),
     )
 }
 
@@ -156,35 +192,47 @@ fn fit_in<T: Real>(
     let cal = &fit.calibration;
     let b = cal.hard_iron();
     let w = cal.soft_iron();
-    // The calibrated norms of the samples the core used (the finite ones in
-    // precision `T`), for the spread figure.
+    let report = &fit.report;
+    // What the fit did with each row, in precision `T` as the core decided.
+    let classes: Vec<SampleClass> = report.selection.classify(cal, samples).collect();
+    // The calibrated norms of the rows the core used, for the spread figure.
     let norms = samples
         .iter()
-        .map(|s| s.map(T::lit))
-        .filter(|y| y.iter().all(|v| v.is_finite()))
-        .map(|y| cal.apply(y).norm().to_f64());
+        .zip(&classes)
+        .filter(|(_, c)| **c == SampleClass::Used)
+        .map(|(s, _)| cal.apply(s.map(T::lit)).norm().to_f64());
     Ok(Outcome {
-        method: fit.report.method.name(),
-        ls: fit.report.ls.name(),
+        method: report.method.name(),
+        ls: report.ls.name(),
         precision: precision.name(),
-        samples_used: fit.report.samples_used,
-        samples_dropped: fit.report.samples_dropped,
+        robust: config.robust,
+        samples_used: report.samples_used,
+        samples_dropped: report.samples_dropped,
+        drops: DropCounts(report.drops),
+        screened: report.screened,
+        rejected: report.rejected,
         hard_iron: [b.x, b.y, b.z].map(T::to_f64),
         soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
         field_strength: cal.field_strength().to_f64(),
-        iterations: fit.report.iterations,
-        passes: fit.report.passes,
+        iterations: report.iterations,
+        passes: report.passes,
+        robust_passes: report.robust_passes,
         timing_us: elapsed.as_secs_f64() * 1e6,
         quality: Quality {
-            radial_rms: fit.report.radial_rms.to_f64(),
+            radial_rms: report.radial_rms.to_f64(),
             norm_spread: spread(norms),
-            flatness: fit.report.quality.flatness.to_f64(),
-            quadric_gap: fit.report.quality.quadric_gap.to_f64(),
-            distortion: fit.report.quality.distortion.to_f64(),
-            coverage: fit.report.quality.coverage.to_f64(),
-            gram_condition: fit.report.quality.gram_condition.to_f64(),
-            warnings: fit.report.warnings.iter().map(|w| w.name()).collect(),
+            flatness: report.quality.flatness.to_f64(),
+            quadric_gap: report.quality.quadric_gap.to_f64(),
+            distortion: report.quality.distortion.to_f64(),
+            coverage: report.quality.coverage.to_f64(),
+            gram_condition: report.quality.gram_condition.to_f64(),
+            fit_error: report.quality.fit_error.to_f64(),
+            lack_of_fit: report.quality.lack_of_fit.to_f64(),
+            outlier_share: report.quality.outlier_share.to_f64(),
+            warnings: report.warnings.iter().map(|w| w.name()).collect(),
         },
+        selection: SelectionJson::from_core(&report.selection),
+        classes,
     })
 }
 
@@ -259,6 +307,49 @@ mod tests {
             assert!(o.quality.warnings.is_empty(), "{:?}", o.quality.warnings);
             let cal = o.calibration().expect("rebuilds");
             assert!((cal.field_strength() - o.field_strength).abs() < 1e-9 * o.field_strength);
+        }
+    }
+
+    #[test]
+    fn classes_agree_with_the_counts() {
+        let mut samples = ellipsoid(200);
+        samples[50] = [900.0, 400.0, -300.0]; // far away: screened
+        samples[120] = [300.0, -120.0, 75.0]; // the centre: rejected
+        samples.push([f64::NAN, 1.0, 2.0]);
+        for precision in [Precision::F64, Precision::F32] {
+            let o = fit(&samples, &Config::default(), precision).expect("fits");
+            let n = |class: fn(&SampleClass) -> bool| o.classes.iter().filter(|c| class(c)).count();
+            assert_eq!(o.classes.len(), samples.len());
+            assert_eq!(n(|c| *c == SampleClass::Used), o.samples_used);
+            assert_eq!(n(|c| matches!(c, SampleClass::Dropped(_))), 1);
+            assert_eq!(n(|c| *c == SampleClass::Screened), o.screened);
+            assert_eq!(n(|c| *c == SampleClass::Rejected), o.rejected);
+            assert!(o.classes[50] != SampleClass::Used && o.classes[120] != SampleClass::Used);
+            assert_eq!(o.samples_used + 1 + o.screened + o.rejected, samples.len());
+            assert!(o.robust && o.robust_passes > 0 && o.selection.screen.is_some());
+            assert!((o.hard_iron[0] - 300.0).abs() < 1e-2, "{:?}", o.hard_iron);
+
+            // The plain fit trusts every finite row: the far one bends it
+            // until the rows lie on no sphere (refused); without it, the
+            // row at the centre is used like any other.
+            let plain = Config {
+                robust: false,
+                ..Config::default()
+            };
+            let err = fit(&samples, &plain, precision).unwrap_err();
+            assert!(
+                matches!(err, CliError::Refused(mag_cal_core::Error::NoSphere { .. })),
+                "{err}"
+            );
+            let mut near = samples.clone();
+            near[50] = ellipsoid(200)[50];
+            let o = fit(&near, &plain, precision).expect("fits");
+            assert_eq!((o.samples_used, o.samples_dropped), (200, 1));
+            assert_eq!((o.screened, o.rejected), (0, 0));
+            assert_eq!((o.robust, o.robust_passes), (false, 0));
+            assert_eq!(o.selection, SelectionJson::ALL);
+            let used = o.classes.iter().filter(|c| **c == SampleClass::Used);
+            assert_eq!(used.count(), 200);
         }
     }
 

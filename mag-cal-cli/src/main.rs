@@ -11,15 +11,17 @@
 //! | [`fit`] | the `fit` subcommand: one call to the core, timed |
 //! | [`output`] | the text (for people) and JSON (for programs) reports |
 //! | [`svg`] | `fit --plot`: the samples before and after, as SVG |
-//! | [`apply`] | the `apply` subcommand: calibrated samples and headings as CSV |
+//! | [`selection`] | which rows a fit used: drop counts, the JSON `selection`, row classes |
+//! | [`apply`] | the `apply` subcommand: calibrated samples, headings and row flags as CSV |
 //! | [`error`] | the error type and its exit codes |
 //!
 //! Exit codes: 0 success, 2 usage, I/O or parse error, 3 calibration refused
 //! by the core. Every failure prints one line on stderr naming the reason
 //! (clap's usage errors start with such a line and add a usage hint). A
-//! success prints nothing on stderr, except one `magcal: note: columns ...`
-//! line when the sample columns were found in the header and the output
-//! does not say so (`fit --format json`, `apply`).
+//! success prints nothing on stderr, except `magcal: note: ...` lines: one
+//! `columns ...` when the sample columns were found in the header and the
+//! output does not say so (`fit --format json`, `apply`), and one for
+//! `apply --flags` with a calibration file that has no `selection`.
 
 mod apply;
 mod cli;
@@ -27,6 +29,7 @@ mod error;
 mod fit;
 mod input;
 mod output;
+mod selection;
 mod svg;
 
 use std::io::Write;
@@ -48,9 +51,9 @@ fn main() -> ExitCode {
         }
     };
     match run(cli) {
-        Ok(note) => {
+        Ok(notes) => {
             // After the output, so that a failure stays one line on stderr.
-            if let Some(note) = note {
+            for note in notes {
                 let _ = writeln!(std::io::stderr(), "magcal: note: {note}");
             }
             ExitCode::SUCCESS
@@ -62,9 +65,9 @@ fn main() -> ExitCode {
     }
 }
 
-/// Dispatches a parsed command line to its subcommand; returns its note
+/// Dispatches a parsed command line to its subcommand; returns its notes
 /// for stderr, if any.
-fn run(cli: Cli) -> Result<Option<String>, CliError> {
+fn run(cli: Cli) -> Result<Vec<String>, CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(&args, &mut std::io::stdout().lock()),
         Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),

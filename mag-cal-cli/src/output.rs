@@ -32,11 +32,8 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
         "  method        {} (LS step {}), precision {}",
         o.method, o.ls, o.precision
     );
-    let _ = writeln!(
-        s,
-        "  samples       {} used, {} dropped (non-finite)",
-        o.samples_used, o.samples_dropped
-    );
+    let _ = writeln!(s, "  outliers      {}", outlier_handling(o));
+    let _ = writeln!(s, "  samples       {}", sample_counts(o));
     let _ = writeln!(s, "  iterations    {}", o.iterations);
     let _ = writeln!(
         s,
@@ -68,6 +65,13 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
         "  norm spread   {}  (std / mean of |W (raw - b)|)",
         sig(o.quality.norm_spread, 4)
     );
+    let _ = writeln!(
+        s,
+        "  fit error     {} of the field, lack of fit {}, outlier share {} %",
+        sig(o.quality.fit_error, 3),
+        sig(o.quality.lack_of_fit, 2),
+        sig(100.0 * o.quality.outlier_share, 2)
+    );
     let warnings = if o.quality.warnings.is_empty() {
         "none".to_owned()
     } else {
@@ -85,6 +89,48 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
         s,
         "apply: calibrated = W (raw - b)  (unit sphere; times the field strength for sensor units)"
     );
+    s
+}
+
+/// The `outliers` line: whether outlier handling ran, and its passes.
+fn outlier_handling(o: &Outcome) -> String {
+    match (o.robust, o.robust_passes) {
+        (false, _) => "off (--plain: every finite row trusted)".to_owned(),
+        (true, 0) => "on; the plain fit was clean (0 robust passes)".to_owned(),
+        (true, 1) => "on, 1 robust pass (screening, robust LS refits)".to_owned(),
+        (true, n) => format!("on, {n} robust passes (screening, robust LS refits)"),
+    }
+}
+
+/// The `samples` line: every row counted once, e.g. `298 used of 300: 0
+/// dropped, 0 screened, 2 rejected (residual beyond 0.0946 of the field)`.
+fn sample_counts(o: &Outcome) -> String {
+    let rows = o.samples_used + o.samples_dropped + o.screened + o.rejected;
+    let mut s = format!(
+        "{} used of {rows}: {} dropped",
+        o.samples_used, o.samples_dropped
+    );
+    if o.samples_dropped > 0 {
+        let rules: Vec<String> = o
+            .drops
+            .by_rule()
+            .filter(|&(_, n)| n > 0)
+            .map(|(rule, n)| format!("{n} {}", rule.name().replace('_', "-")))
+            .collect();
+        let _ = write!(s, " ({})", rules.join(", "));
+    }
+    let _ = write!(s, ", {} screened", o.screened);
+    if let Some(screen) = o.selection.screen.filter(|_| o.screened > 0) {
+        let _ = write!(
+            s,
+            " (farther than {} from the median centre)",
+            sig(screen.radius, 4)
+        );
+    }
+    let _ = write!(s, ", {} rejected", o.rejected);
+    if let Some(limit) = o.selection.residual_limit.filter(|_| o.rejected > 0) {
+        let _ = write!(s, " (residual beyond {} of the field)", sig(limit, 3));
+    }
     s
 }
 
@@ -167,19 +213,30 @@ pub fn sig(value: f64, digits: usize) -> String {
 mod tests {
     use super::*;
     use crate::fit::Quality;
+    use crate::selection::{DropCounts, Screen, SelectionJson};
+    use mag_cal_core::Drops;
 
     fn outcome() -> Outcome {
         Outcome {
             method: "adc2",
             ls: "ls9",
             precision: "f64",
+            robust: true,
             samples_used: 300,
             samples_dropped: 2,
+            drops: DropCounts(Drops {
+                non_finite: 1,
+                repeated: 1,
+                ..Drops::default()
+            }),
+            screened: 0,
+            rejected: 3,
             hard_iron: [-156.7, -52.79, 0.1 + 0.2],
             soft_iron: [[0.0041, 1e-5, 0.0], [1e-5, 0.0041, 0.0], [0.0, 0.0, 0.0039]],
             field_strength: 250.0,
             iterations: 5,
             passes: 1,
+            robust_passes: 2,
             timing_us: 12.5,
             quality: Quality {
                 radial_rms: 0.0123,
@@ -189,8 +246,21 @@ mod tests {
                 distortion: 1.1,
                 coverage: 0.2,
                 gram_condition: 5.4,
+                fit_error: 0.023_78,
+                lack_of_fit: 0.003_04,
+                outlier_share: 0.01,
                 warnings: vec!["pass_cap"],
             },
+            selection: SelectionJson {
+                glitch_rules: true,
+                screen: Some(Screen {
+                    centre: [1.0, 2.0, 3.0],
+                    radius: 812.345,
+                }),
+                residual_limit: Some(0.094_61),
+                ..SelectionJson::ALL
+            },
+            classes: Vec::new(),
         }
     }
 
@@ -216,6 +286,19 @@ mod tests {
         assert_eq!(v["samples_dropped"].as_u64(), Some(2));
         assert_eq!(v["passes"].as_u64(), Some(1));
         assert_eq!(v["quality"]["warnings"], serde_json::json!(["pass_cap"]));
+        assert_eq!(v["drops"]["repeated"].as_u64(), Some(1));
+        assert_eq!(v["drops"].as_object().map(|d| d.len()), Some(6));
+        assert_eq!(
+            (v["screened"].as_u64(), v["rejected"].as_u64()),
+            (Some(0), Some(3))
+        );
+        assert_eq!(v["robust_passes"].as_u64(), Some(2));
+        assert_eq!(v["robust"], true);
+        assert_eq!(v["quality"]["fit_error"].as_f64(), Some(0.023_78));
+        assert_eq!(v["selection"]["screen"]["radius"].as_f64(), Some(812.345));
+        assert_eq!(v["selection"]["residual_limit"].as_f64(), Some(0.094_61));
+        assert!(v["selection"]["clip_levels"][2][1].is_null());
+        assert!(v.get("classes").is_none(), "{v}");
     }
 
     #[test]
@@ -239,6 +322,36 @@ mod tests {
         assert!(t.contains("calibrated = W (raw - b)"));
         assert!(t.contains("  passes        1  "), "{t}");
         assert!(t.contains("  warnings      pass_cap\n"), "{t}");
+        assert!(
+            t.contains(
+                "  samples       300 used of 305: 2 dropped (1 non-finite, 1 repeated), \
+                 0 screened, 3 rejected (residual beyond 0.0946 of the field)\n"
+            ),
+            "{t}"
+        );
+        assert!(
+            t.contains("  outliers      on, 2 robust passes (screening, robust LS refits)\n"),
+            "{t}"
+        );
+        assert!(
+            t.contains(
+                "  fit error     0.0238 of the field, lack of fit 0.0030, outlier share 1.0 %\n"
+            ),
+            "{t}"
+        );
+        let mut plain = outcome();
+        (plain.robust, plain.samples_dropped, plain.rejected) = (false, 0, 0);
+        plain.drops = DropCounts::default();
+        plain.screened = 4;
+        let t = text(&plain, "f", "c");
+        assert!(t.contains("  outliers      off (--plain"), "{t}");
+        assert!(
+            t.contains(
+                "  samples       300 used of 304: 0 dropped, 4 screened (farther than 812.3 \
+                 from the median centre), 0 rejected\n"
+            ),
+            "{t}"
+        );
         let mut quiet = outcome();
         quiet.quality.warnings.clear();
         assert!(text(&quiet, "f", "c").contains("  warnings      none\n"));

@@ -2,17 +2,23 @@
 //! calibration.
 //!
 //! Four panels (each a `<g class="panel">`): the raw samples shifted by the
-//! hard iron, `y - b` (blue), and the calibrated samples in sensor units,
-//! `rho W (y - b)` (orange), projected on the XY, XZ and YZ planes with the
-//! circle of radius `rho`, all at one scale; and the paper's Fig. 2, the
-//! per-sample norms `|y - b| / rho` and `|W (y - b)|` against the sample
-//! index with the unit line. Non-finite samples are left out; long inputs
-//! are thinned to one sample in k. The output depends on the inputs only
-//! (no timestamps), and every coordinate is finite.
+//! hard iron, `y - b` (blue), and the calibrated samples the fit used, in
+//! sensor units, `rho W (y - b)` (orange), projected on the XY, XZ and YZ
+//! planes with the circle of radius `rho`, all at one scale; and the
+//! paper's Fig. 2, the per-sample norms `|y - b| / rho` and `|W (y - b)|`
+//! against the sample index with the unit line. Rows the fit did not use
+//! are red crosses at their calibrated position: `x` rejected by their
+//! residual, `+` screened out (drawn on the frame when they lie beyond it).
+//! Rows dropped by the rules (non-finite, overflowing, glitches) are not
+//! drawn; the subtitle counts every class. Long inputs are thinned to one
+//! used sample in k, and more than [`MAX_CROSSES`] outliers to one in j
+//! (the subtitle says so). The output
+//! depends on the inputs only (no timestamps), and every coordinate is
+//! finite.
 
 use std::fmt::Write as _;
 
-use mag_cal_core::Calibration;
+use mag_cal_core::{Calibration, SampleClass};
 
 use crate::output::sig;
 
@@ -26,15 +32,26 @@ pub struct PlotTitle<'a> {
     pub ls: &'a str,
     /// Radial RMS of the fit.
     pub radial_rms: f64,
+    /// Fit error of the fit.
+    pub fit_error: f64,
+    /// The residual beyond which rows were rejected, if any.
+    pub residual_limit: Option<f64>,
+    /// Outlier handling was on.
+    pub robust: bool,
 }
 
 const WIDTH: f64 = 1200.0;
 const HEIGHT: f64 = 820.0;
 const RAW: &str = "#1f77b4";
 const CAL: &str = "#ff7f0e";
+const OUT: &str = "#d62728";
 const REF: &str = "#333";
 /// Most points drawn per series; longer inputs are thinned by a stride.
 const MAX_POINTS: usize = 3000;
+/// Most outliers (screened and rejected rows) drawn as crosses; more are
+/// thinned by a stride of their own (crosses weigh more than dots, and a
+/// few hundred show where the outliers lie).
+const MAX_CROSSES: usize = 300;
 
 /// Text styles: attributes of a `<text>` element.
 const TITLE: &str = r#"text-anchor="middle" font-size="18" font-weight="bold""#;
@@ -44,8 +61,9 @@ const CENTRED: &str = r#"text-anchor="middle""#;
 const TICK_X: &str = r#"text-anchor="middle" font-size="11""#;
 const TICK_Y: &str = r#"text-anchor="end" font-size="11""#;
 
-/// A drawn sample: input row, `y - b`, `rho W (y - b)`.
-type Drawn = (usize, [f64; 3], [f64; 3]);
+/// A drawn sample: input row, `y - b`, `rho W (y - b)`, what the fit did
+/// with it (used, screened or rejected).
+type Drawn = (usize, [f64; 3], [f64; 3], SampleClass);
 
 /// A rectangle of the canvas mapping data ranges onto it (y up).
 struct Area {
@@ -75,64 +93,167 @@ impl Area {
             )
         })
     }
+    /// A finite canvas point inside the area: beyond it, on its frame.
+    fn inside(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        let (px, py) = (self.px(x), self.py(y));
+        let clamp = |v: f64, lo: f64, len: f64| {
+            // NaN (no position along this axis) is left out.
+            (!v.is_nan()).then(|| v.clamp(lo, lo + len))
+        };
+        Some((
+            clamp(px, self.left, self.width)?,
+            clamp(py, self.top, self.height)?,
+        ))
+    }
 }
 
-/// The SVG document for `samples` calibrated by `cal`.
-pub fn plot(samples: &[[f64; 3]], cal: &Calibration<f64>, title: &PlotTitle<'_>) -> String {
+/// Rows of each class, counted from the classes.
+#[derive(Default)]
+struct Counts {
+    used: usize,
+    dropped: usize,
+    screened: usize,
+    rejected: usize,
+}
+
+impl Counts {
+    fn of(classes: &[SampleClass]) -> Self {
+        let mut c = Counts::default();
+        for class in classes {
+            match class {
+                SampleClass::Used => c.used += 1,
+                SampleClass::Dropped(_) => c.dropped += 1,
+                SampleClass::Screened => c.screened += 1,
+                SampleClass::Rejected => c.rejected += 1,
+            }
+        }
+        c
+    }
+}
+
+/// The SVG document for `samples` calibrated by `cal`; `classes` says what
+/// the fit did with each row (a row without a class counts as dropped).
+pub fn plot(
+    samples: &[[f64; 3]],
+    classes: &[SampleClass],
+    cal: &Calibration<f64>,
+    title: &PlotTitle<'_>,
+) -> String {
     let (rho, b) = (cal.field_strength(), cal.hard_iron());
-    let finite = |y: &&[f64; 3]| y.iter().all(|v| v.is_finite());
-    let used = samples.iter().filter(finite).count();
-    let stride = used.div_ceil(MAX_POINTS).max(1);
-    let drawn: Vec<Drawn> = samples
+    let counts = Counts::of(&classes[..classes.len().min(samples.len())]);
+    let counts = Counts {
+        dropped: counts.dropped + samples.len().saturating_sub(classes.len()),
+        ..counts
+    };
+    let stride = counts.used.div_ceil(MAX_POINTS).max(1);
+    let cross_stride = (counts.screened + counts.rejected)
+        .div_ceil(MAX_CROSSES)
+        .max(1);
+    let shown = |class: SampleClass| !matches!(class, SampleClass::Dropped(_));
+    let used = samples
         .iter()
+        .zip(classes)
         .enumerate()
-        .filter(|(_, y)| finite(y))
-        .step_by(stride)
-        .map(|(i, y)| {
+        .filter(|(_, (_, c))| **c == SampleClass::Used)
+        .step_by(stride);
+    let outliers = samples
+        .iter()
+        .zip(classes)
+        .enumerate()
+        .filter(|(_, (_, c))| shown(**c) && **c != SampleClass::Used)
+        .step_by(cross_stride);
+    let mut drawn: Vec<Drawn> = used
+        .chain(outliers)
+        .map(|(i, (y, class))| {
             let c = cal.apply_scaled(*y);
-            (i, [y[0] - b.x, y[1] - b.y, y[2] - b.z], [c.x, c.y, c.z])
+            (
+                i,
+                [y[0] - b.x, y[1] - b.y, y[2] - b.z],
+                [c.x, c.y, c.z],
+                *class,
+            )
         })
         .collect();
+    drawn.sort_by_key(|d| d.0);
 
     let mut s = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" viewBox="0 0 {WIDTH} {HEIGHT}" font-family="DejaVu Sans, Arial, sans-serif" font-size="12">
 <rect width="100%" height="100%" fill="white"/>
 "#
     );
-    let heading = format!(
-        "magcal fit: {} \u{2014} method {} (LS {}), radial RMS {}",
+    let mut heading = format!(
+        "magcal fit: {} \u{2014} method {} (LS {}), radial RMS {}, fit error {}",
         title.source,
         title.method,
         title.ls,
-        sig(title.radial_rms, 3)
+        sig(title.radial_rms, 3),
+        sig(title.fit_error, 3)
     );
+    if !title.robust {
+        heading.push_str(", --plain");
+    }
     text(&mut s, WIDTH / 2.0, 30.0, TITLE, &heading);
     let mut sub = format!(
-        "{used} samples, field strength \u{3c1} = {}, hard iron b = [{}, {}, {}]",
+        "{} rows: {} used, {} dropped, {} screened, {} rejected; \
+         field strength \u{3c1} = {}, hard iron b = [{}, {}, {}]",
+        samples.len(),
+        counts.used,
+        counts.dropped,
+        counts.screened,
+        counts.rejected,
         sig(rho, 4),
         sig(b.x, 4),
         sig(b.y, 4),
         sig(b.z, 4)
     );
-    if used < samples.len() {
-        let _ = write!(sub, ", {} non-finite left out", samples.len() - used);
-    }
     if stride > 1 {
-        let _ = write!(sub, ", 1 in {stride} samples drawn");
+        let _ = write!(sub, "; 1 in {stride} used rows drawn");
+    }
+    if cross_stride > 1 {
+        let _ = write!(sub, ", 1 in {cross_stride} outliers");
     }
     text(&mut s, WIDTH / 2.0, 52.0, SUBTITLE, &sub);
-    let entries = [
-        (RAW, Mark::Dot, "raw \u{2212} b"),
-        (CAL, Mark::Dot, "calibrated \u{3c1} W (raw \u{2212} b)"),
-        (REF, Mark::Dash, "circle of radius \u{3c1}"),
+    let rejected = match title.residual_limit {
+        Some(limit) => format!(
+            "rejected ({}): |W (y \u{2212} b)| off 1 by > {}",
+            counts.rejected,
+            sig(limit, 3)
+        ),
+        None => format!("rejected ({})", counts.rejected),
+    };
+    let screened = format!(
+        "screened out ({}; beyond the frame: on its edge)",
+        counts.screened
+    );
+    let mut entries = vec![
+        (RAW, Mark::Dot, "raw \u{2212} b".to_owned()),
+        (
+            CAL,
+            Mark::Dot,
+            "calibrated \u{3c1} W (raw \u{2212} b)".to_owned(),
+        ),
     ];
-    legend(&mut s, WIDTH / 2.0 - 300.0, 78.0, &entries);
+    if counts.rejected > 0 {
+        entries.push((OUT, Mark::Cross, rejected));
+    }
+    if counts.screened > 0 {
+        entries.push((OUT, Mark::Plus, screened));
+    }
+    entries.push((REF, Mark::Dash, "circle of radius \u{3c1}".to_owned()));
+    legend(
+        &mut s,
+        WIDTH / 2.0 - legend_width(&entries) / 2.0,
+        78.0,
+        &entries,
+    );
 
     // One symmetric range for the three projections: equal aspect, equal
-    // scale; far outliers (beyond 3 rho) are clipped.
+    // scale, from the rows used; outliers beyond it (and anything beyond
+    // 3 rho) sit on the frame or are clipped.
     let reach = drawn
         .iter()
-        .flat_map(|(_, r, c)| r.iter().chain(c).map(|v| v.abs()))
+        .filter(|d| d.3 == SampleClass::Used)
+        .flat_map(|(_, r, c, _)| r.iter().chain(c).map(|v| v.abs()))
         .fold(rho, f64::max)
         .min(3.0 * rho);
     let half = nice_ceiling(reach * 1.04);
@@ -161,10 +282,13 @@ fn projection(s: &mut String, area: &Area, drawn: &[Drawn], (i, j): (usize, usiz
     axes(s, area, &unit(i), &unit(j));
     let _ = writeln!(s, r#"<g clip-path="url(#clip-{name})">"#);
     for (colour, calibrated) in [(RAW, false), (CAL, true)] {
-        let points = drawn.iter().filter_map(|(_, r, c)| {
-            let v = if calibrated { c } else { r };
-            area.point(v[i], v[j])
-        });
+        let points = drawn
+            .iter()
+            .filter(|d| !calibrated || d.3 == SampleClass::Used)
+            .filter_map(|(_, r, c, _)| {
+                let v = if calibrated { c } else { r };
+                area.point(v[i], v[j])
+            });
         path(s, colour, true, points);
     }
     let (cx, cy, r) = (area.px(0.0), area.py(0.0), area.px(rho) - area.px(0.0));
@@ -174,20 +298,64 @@ fn projection(s: &mut String, area: &Area, drawn: &[Drawn], (i, j): (usize, usiz
             r#"<circle cx="{cx:.1}" cy="{cy:.1}" r="{r:.1}" fill="none" stroke="{REF}" stroke-width="1.2" stroke-dasharray="6 4"/>"#
         );
     }
-    s.push_str("</g>\n</g>\n");
+    s.push_str("</g>\n");
+    // Outside the clip: an outlier beyond the frame sits on it.
+    crosses(s, drawn, |(_, _, c, _)| area.inside(c[i], c[j]));
+    s.push_str("</g>\n");
+}
+
+/// The rows of `drawn` the fit did not use, as red crosses at `place`:
+/// `x` rejected, `+` screened.
+fn crosses(s: &mut String, drawn: &[Drawn], place: impl Fn(&Drawn) -> Option<(f64, f64)>) {
+    for (class, mark) in [
+        (SampleClass::Rejected, Mark::Cross),
+        (SampleClass::Screened, Mark::Plus),
+    ] {
+        let points: Vec<(f64, f64)> = drawn
+            .iter()
+            .filter(|d| d.3 == class)
+            .filter_map(&place)
+            .collect();
+        if points.is_empty() {
+            continue;
+        }
+        let _ = write!(
+            s,
+            r#"<path class="{}" fill="none" stroke="{OUT}" stroke-width="1.6" stroke-linecap="round" d=""#,
+            if class == SampleClass::Rejected {
+                "rejected"
+            } else {
+                "screened"
+            }
+        );
+        for (x, y) in points {
+            let _ = match mark {
+                Mark::Cross => write!(s, "M{:.1} {:.1}l8 8m0 -8l-8 8", x - 4.0, y - 4.0),
+                _ => write!(s, "M{:.1} {y:.1}h10M{x:.1} {:.1}v10", x - 5.0, y - 5.0),
+            };
+        }
+        s.push_str("\"/>\n");
+    }
 }
 
 /// The paper's Fig. 2: norms against the sample index, with the unit line.
 fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
     let norm = |v: [f64; 3]| v[0].hypot(v[1]).hypot(v[2]) / rho;
-    let norms: Vec<(usize, f64, f64)> = drawn
+    let norms: Vec<(usize, f64, f64, SampleClass)> = drawn
         .iter()
-        .map(|&(i, r, c)| (i, norm(r), norm(c)))
-        .filter(|(_, r, c)| r.is_finite() && c.is_finite())
+        .map(|&(i, r, c, class)| (i, norm(r), norm(c), class))
+        .filter(|(_, r, c, _)| r.is_finite() && c.is_finite())
         .collect();
+    // The range of the rows used and of the rejected rows' calibrated
+    // norms (screened rows may lie far off: they sit on the frame).
     let (lo, hi) = norms
         .iter()
-        .flat_map(|&(_, r, c)| [r, c])
+        .flat_map(|&(_, r, c, class)| match class {
+            SampleClass::Used => [Some(r), Some(c)],
+            SampleClass::Rejected => [Some(c), None],
+            _ => [None, None],
+        })
+        .flatten()
         .fold((1.0f64, 1.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let pad = 0.06 * (hi - lo).max(0.02);
     let area = Area {
@@ -200,11 +368,16 @@ fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
     };
     open_panel(s, "norm", &area, "Norm per sample (paper's Fig. 2)");
     let entries = [
-        (RAW, Mark::Line, "raw |y \u{2212} b| / \u{3c1}"),
-        (CAL, Mark::Line, "calibrated |W (y \u{2212} b)|"),
-        (REF, Mark::Dash, "1"),
+        (RAW, Mark::Line, "raw |y \u{2212} b| / \u{3c1}".to_owned()),
+        (
+            CAL,
+            Mark::Line,
+            "calibrated |W (y \u{2212} b)|, rows used".to_owned(),
+        ),
+        (REF, Mark::Dash, "1".to_owned()),
     ];
-    legend(s, area.left + area.width - 560.0, area.top - 12.0, &entries);
+    let width = legend_width(&entries);
+    legend(s, area.left + area.width - width, area.top - 12.0, &entries);
     axes(s, &area, "sample index", "norm");
     let (y, x0, x1) = (area.py(1.0), area.left, area.left + area.width);
     let _ = writeln!(
@@ -215,10 +388,14 @@ fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
     for (colour, calibrated) in [(RAW, false), (CAL, true)] {
         let points = norms
             .iter()
-            .filter_map(|&(i, r, c)| area.point(i as f64, if calibrated { c } else { r }));
+            .filter(|n| !calibrated || n.3 == SampleClass::Used)
+            .filter_map(|&(i, r, c, _)| area.point(i as f64, if calibrated { c } else { r }));
         path(s, colour, false, points);
     }
-    s.push_str("</g>\n</g>\n");
+    s.push_str("</g>\n");
+    let calibrated_norm = |&(i, _, c, _): &Drawn| area.inside(i as f64, norm(c));
+    crosses(s, drawn, calibrated_norm);
+    s.push_str("</g>\n");
 }
 
 /// Opens a panel group: clip path, frame and title (closed by the caller).
@@ -280,10 +457,29 @@ enum Mark {
     Dot,
     Line,
     Dash,
+    /// `x`, a rejected row.
+    Cross,
+    /// `+`, a screened row.
+    Plus,
+}
+
+/// A legend entry: colour, mark, label.
+type Entry = (&'static str, Mark, String);
+
+/// About 6.6 px per character at 12 px.
+const CHAR_WIDTH: f64 = 6.6;
+
+/// The width [`legend`] takes for `entries`.
+fn legend_width(entries: &[Entry]) -> f64 {
+    entries
+        .iter()
+        .map(|(_, _, label)| 50.0 + CHAR_WIDTH * label.chars().count() as f64)
+        .sum::<f64>()
+        - 22.0
 }
 
 /// A row of legend entries starting at `x`.
-fn legend(s: &mut String, mut x: f64, y: f64, entries: &[(&str, Mark, &str)]) {
+fn legend(s: &mut String, mut x: f64, y: f64, entries: &[Entry]) {
     for (colour, mark, label) in entries {
         let (cy, end) = (y - 4.0, x + 22.0);
         let dash = if matches!(mark, Mark::Dash) {
@@ -291,6 +487,7 @@ fn legend(s: &mut String, mut x: f64, y: f64, entries: &[(&str, Mark, &str)]) {
         } else {
             ""
         };
+        let (mx, my) = (x + 11.0, cy);
         let _ = match mark {
             Mark::Dot => writeln!(
                 s,
@@ -301,10 +498,21 @@ fn legend(s: &mut String, mut x: f64, y: f64, entries: &[(&str, Mark, &str)]) {
                 s,
                 r#"<line x1="{x:.1}" y1="{cy:.1}" x2="{end:.1}" y2="{cy:.1}" stroke="{colour}" stroke-width="2"{dash}/>"#
             ),
+            Mark::Cross => writeln!(
+                s,
+                r#"<path fill="none" stroke="{colour}" stroke-width="1.6" stroke-linecap="round" d="M{:.1} {:.1}l8 8m0 -8l-8 8"/>"#,
+                mx - 4.0,
+                my - 4.0
+            ),
+            Mark::Plus => writeln!(
+                s,
+                r#"<path fill="none" stroke="{colour}" stroke-width="1.6" stroke-linecap="round" d="M{:.1} {my:.1}h10M{mx:.1} {:.1}v10"/>"#,
+                mx - 5.0,
+                my - 5.0
+            ),
         };
         text(s, x + 28.0, y, "", label);
-        // About 6.6 px per character at 12 px.
-        x += 50.0 + 6.6 * label.chars().count() as f64;
+        x += 50.0 + CHAR_WIDTH * label.chars().count() as f64;
     }
 }
 
@@ -410,19 +618,48 @@ mod tests {
                 [50.0 * a.cos(), 50.0 * a.sin(), 40.0 * (a * 0.3).sin()]
             })
             .collect();
-        samples.extend([[f64::NAN, 0.0, 0.0], [1e300, 0.0, 0.0]]);
+        samples.extend([[f64::NAN, 0.0, 0.0], [1e300, 0.0, 0.0], [80.0, 0.0, 0.0]]);
+        let mut classes = vec![SampleClass::Used; 50];
+        classes.extend([
+            SampleClass::Dropped(mag_cal_core::Rule::NonFinite),
+            SampleClass::Screened,
+            SampleClass::Rejected,
+        ]);
         let title = PlotTitle {
             source: "<a&b>.csv",
             method: "adc2",
             ls: "ls9",
             radial_rms: 0.01,
+            fit_error: 0.012,
+            residual_limit: Some(0.05),
+            robust: true,
         };
-        let svg = plot(&samples, &cal, &title);
+        let svg = plot(&samples, &classes, &cal, &title);
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
         assert_eq!(svg.matches("<g class=\"panel\"").count(), 4);
         assert_eq!(svg.matches("<g").count(), svg.matches("</g>").count());
         assert!(svg.contains("&lt;a&amp;b&gt;.csv"));
         assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
-        assert_eq!(svg, plot(&samples, &cal, &title), "deterministic");
+        assert!(
+            svg.contains("53 rows: 50 used, 1 dropped, 1 screened, 1 rejected;"),
+            "{svg}"
+        );
+        assert!(svg.contains("rejected (1): |W (y \u{2212} b)| off 1 by &gt; 0.0500"));
+        assert!(svg.contains("screened out (1; beyond the frame: on its edge)"));
+        // One cross per outlier in each of the four panels.
+        assert_eq!(svg.matches("<path class=\"rejected\"").count(), 4);
+        assert_eq!(svg.matches("<path class=\"screened\"").count(), 4);
+        assert_eq!(svg, plot(&samples, &classes, &cal, &title), "deterministic");
+
+        // A clean plain fit: no crosses, no cross legend.
+        let used = vec![SampleClass::Used; 50];
+        let plain = PlotTitle {
+            robust: false,
+            residual_limit: None,
+            ..title
+        };
+        let svg = plot(&samples[..50], &used, &cal, &plain);
+        assert!(!svg.contains("rejected (") && !svg.contains("screened out"));
+        assert!(svg.contains("--plain") && svg.contains("50 rows: 50 used, 0 dropped"));
     }
 }

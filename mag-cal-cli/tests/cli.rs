@@ -110,6 +110,75 @@ fn mat3(v: &Value) -> [[f64; 3]; 3] {
     [0, 1, 2].map(|i| vec3(&rows[i]))
 }
 
+/// The row counts of a fit JSON: used, dropped, screened, rejected.
+fn counts(v: &Value) -> [u64; 4] {
+    ["samples_used", "samples_dropped", "screened", "rejected"]
+        .map(|key| v[key].as_u64().unwrap_or_else(|| panic!("{key} in {v}")))
+}
+
+/// Asserts that a fit JSON accounts for each of `rows` input rows once,
+/// that its per-rule drops add up to `samples_dropped`, that the outlier
+/// share is the screened and rejected rows' share of those the rules kept,
+/// and that the warnings say so.
+fn assert_accounts_for(v: &Value, rows: u64) {
+    let [used, dropped, screened, rejected] = counts(v);
+    assert_eq!(used + dropped + screened + rejected, rows, "{v}");
+    let drops = v["drops"].as_object().expect("drops object");
+    // (serde_json's map here sorts its keys; the output keeps RULES order.)
+    let mut names: Vec<&str> = drops.keys().map(String::as_str).collect();
+    let mut rules = RULES.to_vec();
+    names.sort_unstable();
+    rules.sort_unstable();
+    assert_eq!(names, rules, "{v}");
+    let by_rule: u64 = drops.values().map(|n| n.as_u64().expect("count")).sum();
+    assert_eq!(by_rule, dropped, "{v}");
+    let share = v["quality"]["outlier_share"]
+        .as_f64()
+        .expect("outlier_share");
+    let kept = (rows - dropped) as f64;
+    assert!(
+        (share - (screened + rejected) as f64 / kept).abs() < 1e-6,
+        "{share} {v}"
+    );
+    let warned = |name: &str| {
+        v["quality"]["warnings"]
+            .as_array()
+            .expect("warnings")
+            .iter()
+            .any(|w| w == name)
+    };
+    assert_eq!(warned("outliers_rejected"), screened + rejected > 0, "{v}");
+    let glitches = dropped
+        - v["drops"]["non_finite"].as_u64().unwrap_or(0)
+        - v["drops"]["overflow"].as_u64().unwrap_or(0);
+    assert_eq!(warned("rows_dropped"), glitches > 0, "{v}");
+}
+
+/// Asserts that two fit JSONs hold the same calibration, to rounding
+/// (`rel` of each parameter's largest magnitude).
+fn assert_same_calibration(a: &Value, b: &Value, rel: f64) {
+    let (ba, bb) = (vec3(&a["hard_iron"]), vec3(&b["hard_iron"]));
+    let (wa, wb) = (mat3(&a["soft_iron"]), mat3(&b["soft_iron"]));
+    let scale_b = ba.iter().chain(&bb).fold(0.0f64, |m, v| m.max(v.abs()));
+    let scale_w = wa.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (x, y) in ba.iter().zip(bb) {
+        assert!((x - y).abs() <= rel * scale_b, "{ba:?} vs {bb:?}");
+    }
+    for (x, y) in wa.iter().flatten().zip(wb.iter().flatten()) {
+        assert!((x - y).abs() <= rel * scale_w, "{wa:?} vs {wb:?}");
+    }
+}
+
+/// The core's drop rules, by name, in the order of the JSON's `drops`.
+const RULES: [&str; 6] = [
+    "non_finite",
+    "overflow",
+    "zero",
+    "rails",
+    "repeated",
+    "clipped",
+];
+
 #[test]
 fn json_on_icm20948_agrees_with_magneto() {
     let path = real("icm20948_mag_300.csv");
@@ -121,8 +190,24 @@ fn json_on_icm20948_agrees_with_magneto() {
     assert_eq!(v["method"], "adc2");
     assert_eq!(v["ls"], "ls9");
     assert_eq!(v["precision"], "f64");
-    assert_eq!(v["samples_used"], 300);
-    assert_eq!(v["samples_dropped"], 0);
+    assert_eq!(v["robust"], true);
+    // Outlier handling rejects 2 of the 300 rows by their residual (rows 39
+    // and 142, norms 0.89 and 1.13 under the calibration; see
+    // `apply_flags_mark_the_rows_the_fit_used`): the plain fit was not
+    // clean, so the robust passes ran. Magneto rejects 10 at 2 sigma.
+    assert_eq!(counts(&v), [298, 0, 0, 2]);
+    assert_accounts_for(&v, 300);
+    assert!(v["robust_passes"].as_u64().is_some_and(|n| n > 0), "{v}");
+    let limit = v["selection"]["residual_limit"].as_f64().expect("a limit");
+    let fit_error = v["quality"]["fit_error"].as_f64().expect("fit_error");
+    // The cut is 3.5 robust standard deviations of the residual.
+    assert!(
+        limit > 3.0 * fit_error && limit < 4.0 * fit_error,
+        "{limit} {fit_error}"
+    );
+    assert!(fit_error > 0.01 && fit_error < 0.05, "{fit_error}");
+    let lack_of_fit = v["quality"]["lack_of_fit"].as_f64().expect("lack_of_fit");
+    assert!((0.0..0.01).contains(&lack_of_fit), "{lack_of_fit}");
     assert!(v["iterations"].as_u64().is_some_and(|n| n > 0));
     assert!(v["timing_us"].as_f64().is_some_and(|t| t > 0.0 && t < 5e6));
     let rms = v["quality"]["radial_rms"].as_f64().expect("radial_rms");
@@ -177,7 +262,12 @@ fn columns_pick_named_fields() {
         None,
     )
     .json();
-    assert_eq!(v["samples_used"], 1252);
+    // Every row of the file is read: one is dropped as a repeat of the row
+    // before (rows 1050 and 1051 both read -281,-315,390), and outlier
+    // handling rejects 54 (4.3 %) by their residual.
+    assert_accounts_for(&v, 1252);
+    assert_eq!(v["drops"]["repeated"], 1);
+    assert_eq!(counts(&v), [1197, 1, 0, 54]);
     // Raw counts of a few hundred: the accelerometer columns would give a
     // field strength near 9.8.
     let rho = v["field_strength"].as_f64().expect("field_strength");
@@ -199,7 +289,8 @@ fn stdin_and_text_format() {
         "adc2",
         "ls9",
         "f64",
-        "300 used",
+        "\n  samples       298 used of 300: 0 dropped, 0 screened, 2 rejected (residual beyond ",
+        "\n  outliers      on, ",
         "radial RMS",
         "norm spread",
     ] {
@@ -227,6 +318,36 @@ fn stdin_and_text_format() {
     for (shown, exact) in row.iter().zip(b) {
         assert!((shown - exact).abs() < 1e-3, "{row:?} vs {b:?}");
     }
+    // The fit error line holds the JSON's figures (3 and 2 significant
+    // digits), and the residual limit of the samples line too.
+    let figures = text
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("  fit error     "))
+        .expect("fit error line");
+    let numbers: Vec<f64> = figures
+        .split([' ', ','])
+        .filter_map(|f| f.parse().ok())
+        .collect();
+    let q = &v["quality"];
+    let near = |shown: f64, exact: f64, digits: i32| {
+        (shown - exact).abs() <= 0.51 * 10f64.powi(exact.abs().log10().floor() as i32 - digits + 1)
+    };
+    assert!(
+        near(numbers[0], q["fit_error"].as_f64().unwrap(), 3)
+            && near(numbers[1], q["lack_of_fit"].as_f64().unwrap(), 2)
+            && near(numbers[2], 100.0 * q["outlier_share"].as_f64().unwrap(), 2),
+        "{figures} vs {q}"
+    );
+    let limit = v["selection"]["residual_limit"].as_f64().expect("limit");
+    let shown: f64 = text
+        .stdout
+        .split("rejected (residual beyond ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("limit shown");
+    assert!(near(shown, limit, 3), "{shown} vs {limit}");
 }
 
 #[test]
@@ -235,10 +356,18 @@ fn non_finite_rows_are_dropped_and_counted() {
     bytes.extend(std::fs::read(real("icm20948_mag_300.csv")).expect("readable"));
     bytes.extend_from_slice(b"1e400,0,0\n-inf,0,0\n");
     let v = magcal(&["fit", "-", "--format", "json"], Some(&bytes)).json();
-    assert_eq!(
-        (v["samples_used"].as_u64(), v["samples_dropped"].as_u64()),
-        (Some(300), Some(3))
-    );
+    // 1e400 parses as infinity: three non-finite rows, dropped before any
+    // fit; the other 300 are fitted as without them (the same 2 rejected,
+    // the same calibration up to the order of the sums' additions).
+    assert_accounts_for(&v, 303);
+    assert_eq!(counts(&v), [298, 3, 0, 2]);
+    assert_eq!(v["drops"]["non_finite"], 3);
+    let clean = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    )
+    .json();
+    assert_same_calibration(&v, &clean, 1e-12);
 }
 
 #[test]
@@ -308,6 +437,8 @@ fn help_and_version() {
             "--window",
             "--noise-std",
             "--plot",
+            "--plain",
+            "--flags",
             "--method",
             "--ls",
             "--precision",
@@ -393,8 +524,10 @@ fn refusals_exit_3() {
         "five.csv",
         b"-231,29,161\n-233,35,167\n-228,38,172\n-240,38,176\n-234,32,173\n",
     );
-    magcal(&["fit", &five], None)
-        .fails_with(3, "calibration refused: too few usable samples: 5 finite");
+    magcal(&["fit", &five], None).fails_with(
+        3,
+        "calibration refused: too few usable samples: 5 kept, at least 10 required",
+    );
 
     // A planar circle determines no ellipsoid.
     let circle: String = (0..100)
@@ -516,19 +649,25 @@ fn hostile_input_never_panics() {
 }
 
 /// The top-level fields of `magcal fit --format json`.
-const FIT_KEYS: [&str; 12] = [
+const FIT_KEYS: [&str; 18] = [
     "method",
     "ls",
     "precision",
+    "robust",
     "samples_used",
     "samples_dropped",
+    "drops",
+    "screened",
+    "rejected",
     "hard_iron",
     "soft_iron",
     "field_strength",
     "iterations",
     "passes",
+    "robust_passes",
     "timing_us",
     "quality",
+    "selection",
 ];
 
 /// The method names of the core, in the order of the paper's tables.
@@ -548,7 +687,24 @@ fn every_method_via_json() {
             assert!(v.get(key).is_some(), "{method}: missing {key} in {v}");
         }
         assert_eq!(v["method"], method);
-        assert_eq!(v["samples_used"], 300);
+        assert_accounts_for(&v, 300);
+        // The ADC methods cut rows by their residual: the 2 rows of
+        // `json_on_icm20948_agrees_with_magneto`. LS and subMLE report no
+        // residual cut: subMLE uses every row inside the screening, and LS
+        // weights rows only inside its own robust fit, whose estimate it
+        // returns (the core then counts every row inside the screening as
+        // used).
+        let cuts = method.starts_with("adc");
+        assert_eq!(
+            counts(&v),
+            if cuts { [298, 0, 0, 2] } else { [300, 0, 0, 0] },
+            "{method}"
+        );
+        assert_eq!(
+            v["selection"]["residual_limit"].is_number(),
+            cuts,
+            "{method}"
+        );
         let passes = v["passes"].as_u64().expect("passes");
         assert_eq!(passes > 0, method != "ls", "{method}: passes {passes}");
         let warnings = v["quality"]["warnings"].as_array().expect("warnings array");
@@ -624,7 +780,34 @@ fn text_format_shows_passes_and_warnings() {
         .and_then(|n| n.parse::<u32>().ok())
         .expect("passes line");
     assert!(passes > 1, "{}", r.stdout);
-    assert!(r.stdout.contains("  warnings      none\n"), "{}", r.stdout);
+    // The 2 rows cut by their residual are the one warning; --plain trusts
+    // them and warns of nothing.
+    assert!(
+        r.stdout.contains("  warnings      outliers_rejected\n"),
+        "{}",
+        r.stdout
+    );
+    let plain = magcal(&["fit", &path, "--method", "adc2-iter", "--plain"], None);
+    assert_eq!(plain.code, 0, "{}", plain.stderr);
+    assert!(
+        plain.stdout.contains("  warnings      none\n"),
+        "{}",
+        plain.stdout
+    );
+    assert!(
+        plain
+            .stdout
+            .contains("\n  outliers      off (--plain: every finite row trusted)\n"),
+        "{}",
+        plain.stdout
+    );
+    assert!(
+        plain
+            .stdout
+            .contains("\n  samples       300 used of 300: 0 dropped, 0 screened, 0 rejected\n"),
+        "{}",
+        plain.stdout
+    );
 }
 
 /// Parses `magcal apply`'s CSV: the header and the rows of fields.
@@ -673,9 +856,10 @@ fn apply_round_trip() {
             row.iter().map(|f| field(f).powi(2)).sum::<f64>().sqrt()
         })
         .collect();
-    // One sample of this recording (index 141, the spike of the plot's
-    // norm panel) is an outlier at 1.12 (Magneto rejects 10 samples): all
-    // rows within 0.15 of 1, at most 1 % beyond 0.1.
+    // One sample of this recording (row 142 counting from 0, the spike of
+    // the plot's norm panel) is an outlier at 1.13 (Magneto rejects 10
+    // samples; the fit rejects it and row 39): all rows within 0.15 of 1,
+    // at most 1 % beyond 0.1.
     assert!(norms.iter().all(|n| (n - 1.0).abs() < 0.15), "{norms:?}");
     let beyond = norms.iter().filter(|n| (*n - 1.0).abs() >= 0.1).count();
     assert!(beyond * 100 <= norms.len(), "{beyond} rows beyond 0.1");
@@ -1232,28 +1416,393 @@ fn with_absurd_row() -> Vec<u8> {
 
 #[test]
 fn an_absurd_finite_row_is_parsed_and_passed_to_the_core() {
-    // In f32 the core sees 1e308 as infinite and drops it: the parser
-    // passed the row through as a number instead of refusing the file.
-    let v = magcal(
-        &["fit", "-", "--precision", "f32", "--format", "json"],
-        Some(&with_absurd_row()),
+    // In f32 the core sees 1e308 as infinite and drops it as non-finite:
+    // the parser passed the row through as a number instead of refusing
+    // the file. The other 300 rows are fitted as without it.
+    let args = ["fit", "-", "--precision", "f32", "--format", "json"];
+    let v = magcal(&args, Some(&with_absurd_row())).json();
+    assert_accounts_for(&v, 301);
+    assert_eq!(counts(&v), [298, 1, 0, 2]);
+    assert_eq!(v["drops"]["non_finite"], 1);
+    let clean = std::fs::read(real("icm20948_mag_300.csv")).expect("readable");
+    let clean = magcal(&args, Some(&clean)).json();
+    assert_same_calibration(&v, &clean, 1e-6);
+}
+
+#[test]
+fn one_absurd_row_does_not_refuse_the_file() {
+    // In f64, 1e308 is finite but its square overflows: the core drops the
+    // row by its overflow rule (it used to refuse the whole file, exit 3)
+    // and fits the other 300 as without it.
+    let v = magcal(&["fit", "-", "--format", "json"], Some(&with_absurd_row())).json();
+    assert_accounts_for(&v, 301);
+    assert_eq!(counts(&v), [298, 1, 0, 2]);
+    assert_eq!(v["drops"]["overflow"], 1);
+    let b = vec3(&v["hard_iron"]);
+    for (got, want) in b.iter().zip(MAGNETO_B) {
+        assert!((got - want).abs() < 15.0, "{b:?}");
+    }
+    let clean = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
     )
     .json();
+    assert_same_calibration(&v, &clean, 1e-12);
+}
+
+/// Non-empty lines of a file, less `header` lines: its rows.
+fn rows_of(path: &str, header: usize) -> u64 {
+    let text = std::fs::read_to_string(path).expect("readable");
+    (text.lines().filter(|l| !l.trim().is_empty()).count() - header) as u64
+}
+
+#[test]
+fn every_real_recording_accounts_for_each_row() {
+    // (file, header lines); the planar recording is refused.
+    for (name, header) in [
+        ("icm20948_mag_300.csv", 0),
+        ("mag3_raw_541.csv", 0),
+        ("imu_gnss_1252.csv", 1),
+        ("magcal_25598.txt", 0),
+    ] {
+        let path = real(name);
+        let rows = rows_of(&path, header);
+        for precision in ["f64", "f32"] {
+            for plain in [false, true] {
+                let mut args = vec!["fit", &path, "--precision", precision, "--format", "json"];
+                if plain {
+                    args.push("--plain");
+                }
+                let v = magcal(&args, None).json();
+                let what = format!("{name} {precision} plain {plain}");
+                assert_accounts_for(&v, rows);
+                assert_eq!(v["robust"], !plain, "{what}");
+                // The fit uses most rows: at most 6 % are outliers here.
+                let [used, ..] = counts(&v);
+                assert!(used * 100 >= rows * 94, "{what}: {v}");
+                if plain {
+                    // Only rows that cannot be computed with are dropped;
+                    // nothing is screened or rejected, in no robust pass.
+                    let glitches: u64 = ["zero", "rails", "repeated", "clipped"]
+                        .iter()
+                        .map(|r| v["drops"][r].as_u64().expect("count"))
+                        .sum();
+                    assert_eq!(glitches, 0, "{what}");
+                    assert_eq!(
+                        (v["screened"].as_u64(), v["rejected"].as_u64()),
+                        (Some(0), Some(0))
+                    );
+                    assert_eq!(v["robust_passes"], 0, "{what}");
+                    assert_eq!(v["selection"], plain_selection(), "{what}");
+                }
+            }
+        }
+    }
+}
+
+/// The `selection` of a fit that used every finite row.
+fn plain_selection() -> Value {
+    serde_json::json!({
+        "glitch_rules": false,
+        "clip_levels": [[null, null], [null, null], [null, null]],
+        "screen": null,
+        "residual_limit": null
+    })
+}
+
+#[test]
+fn plain_trusts_every_finite_row() {
+    let path = real("icm20948_mag_300.csv");
+    let robust = magcal(&["fit", &path, "--format", "json"], None).json();
+    let plain = magcal(&["fit", &path, "--format", "json", "--plain"], None).json();
+    assert_eq!(counts(&plain), [300, 0, 0, 0]);
+    assert_eq!(plain["robust"], false);
+    assert_eq!(plain["quality"]["warnings"], serde_json::json!([]));
+    // The 2 rejected rows pull the plain hard iron by about half a count,
+    // well within Magneto's agreement.
+    let (b, p) = (vec3(&robust["hard_iron"]), vec3(&plain["hard_iron"]));
+    let moved = b
+        .iter()
+        .zip(p)
+        .map(|(r, p)| (r - p).abs())
+        .fold(0.0, f64::max);
+    assert!(moved > 0.1 && moved < 2.0, "{b:?} vs {p:?}");
+    for (got, want) in p.iter().zip(MAGNETO_B) {
+        assert!((got - want).abs() < 15.0, "{p:?}");
+    }
+
+    // A failed bus read, (0, 0, 0), added to the recording: dropped by the
+    // zero rule with outlier handling, fitted as a sample with --plain.
+    let mut bytes = std::fs::read(&path).expect("readable");
+    bytes.extend_from_slice(b"0,0,0\n");
+    let v = magcal(&["fit", "-", "--format", "json"], Some(&bytes)).json();
+    assert_accounts_for(&v, 301);
+    assert_eq!(v["drops"]["zero"], 1);
+    assert_eq!(v["selection"]["glitch_rules"], true);
+    let v = magcal(&["fit", "-", "--format", "json", "--plain"], Some(&bytes)).json();
+    assert_accounts_for(&v, 301);
+    assert_eq!(counts(&v), [301, 0, 0, 0]);
+    assert_eq!(v["selection"], plain_selection());
+}
+
+#[test]
+fn a_stationary_device_is_refused_as_no_sphere() {
+    // 200 readings of a device lying still: noise of 2 counts around one
+    // point. A sphere fits them no better than noise: the core refuses
+    // them by their fit error, with outlier handling and without.
+    let mut rng = Rng(0x5eed_0000_0000_0001);
+    let mut noise = || (rng.next() % 4001) as f64 / 1000.0 - 2.0;
+    let still: String = (0..200)
+        .map(|_| {
+            format!(
+                "{:.3},{:.3},{:.3}\n",
+                -150.0 + noise(),
+                50.0 + noise(),
+                300.0 + noise()
+            )
+        })
+        .collect();
+    for extra in [
+        &[][..],
+        &["--plain"],
+        &["--precision", "f32"],
+        &["--method", "ls"],
+    ] {
+        magcal(&[&["fit", "-"][..], extra].concat(), Some(still.as_bytes())).fails_with(
+            3,
+            "calibration refused: the samples do not lie on a sphere (fit error 0.",
+        );
+    }
+}
+
+/// `icm20948_mag_300.csv` with 5 wild rows inserted (before the rows 50,
+/// 100, 150, 200 and 250 of the original): far beyond the field, twice the
+/// field, at the hard iron itself, a 2.5k-count glitch, 1.4 times the
+/// field. Returns the file and the spikes' row indices in it.
+fn with_spikes() -> (Vec<u8>, [usize; 5]) {
+    let rows = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
+    let spikes = [
+        "30000,30000,30000",
+        "443,248,-141",
+        "-157,-52,-141",
+        "-2000,1500,-800",
+        "43,-402,109",
+    ];
+    let mut out = String::new();
+    for (i, row) in rows.lines().enumerate() {
+        if i % 50 == 0 && (1..=5).contains(&(i / 50)) {
+            out.push_str(spikes[i / 50 - 1]);
+            out.push('\n');
+        }
+        out.push_str(row);
+        out.push('\n');
+    }
+    (out.into_bytes(), [50, 101, 152, 203, 254])
+}
+
+#[test]
+fn wild_spikes_are_rejected_and_leave_the_hard_iron() {
+    let (bytes, spikes) = with_spikes();
+    let v = magcal(&["fit", "-", "--format", "json"], Some(&bytes)).json();
+    assert_accounts_for(&v, 305);
+    let [used, dropped, screened, rejected] = counts(&v);
+    assert!(screened + rejected >= 5, "{v}");
+    assert_eq!((used, dropped), (298, 0), "{v}");
+    let clean = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    )
+    .json();
+    let (b, c) = (vec3(&v["hard_iron"]), vec3(&clean["hard_iron"]));
+    for (spiked, clean) in b.iter().zip(c) {
+        assert!((spiked - clean).abs() < 1.0, "{b:?} vs clean {c:?}");
+    }
+    // Every spike is among the rows not used.
+    let cal = temp_file(
+        "spikes.cal.json",
+        magcal(&["fit", "-", "--format", "json"], Some(&bytes))
+            .stdout
+            .as_bytes(),
+    );
+    let data = temp_file("spikes.csv", &bytes);
+    let flags = flags_of(&magcal(&["apply", &cal, &data, "--flags"], None));
+    assert_eq!(flags.iter().filter(|(u, _)| *u).count() as u64, used);
+    for i in spikes {
+        assert!(!flags[i].0, "spike row {i}: {:?}", flags[i]);
+    }
+    assert_eq!(flags[50].1, "screened", "30000 counts away");
+    // The plain fit trusts the 30000-count row, whose weight flattens the
+    // samples' covariance: refused (the core names it planar data).
+    magcal(&["fit", "-", "--plain"], Some(&bytes)).fails_with(3, "calibration refused: ");
+}
+
+/// The `used` and `class` columns of an `apply --flags` run, after
+/// checking that they agree (used is 1 exactly for class `used`).
+fn flags_of(r: &Run) -> Vec<(bool, String)> {
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (header, rows) = csv(&r.stdout);
+    let n = header.len();
+    assert_eq!(&header[n - 2..], ["used", "class"], "{header:?}");
+    rows.iter()
+        .map(|row| {
+            assert_eq!(row.len(), n, "{row:?}");
+            let (used, class) = (&row[n - 2], &row[n - 1]);
+            let known = ["used", "screened", "rejected"].contains(&class.as_str())
+                || class
+                    .strip_prefix("dropped:")
+                    .is_some_and(|rule| RULES.contains(&rule));
+            assert!(known, "{class}");
+            assert_eq!(used == "1", class == "used", "{row:?}");
+            assert!(used == "1" || used == "0", "{row:?}");
+            (used == "1", class.clone())
+        })
+        .collect()
+}
+
+#[test]
+fn apply_flags_mark_the_rows_the_fit_used() {
+    let path = real("icm20948_mag_300.csv");
+    for precision in ["f64", "f32"] {
+        let cal = fitted(
+            &path,
+            &["--precision", precision],
+            &format!("flags_{precision}.cal.json"),
+        );
+        let v: Value = serde_json::from_slice(&std::fs::read(&cal).expect("cal")).expect("json");
+        let r = magcal(&["apply", &cal, &path, "--flags"], None);
+        assert!(r.stderr.is_empty(), "{}", r.stderr);
+        let flags = flags_of(&r);
+        assert_eq!(flags.len(), 300);
+        let used = flags.iter().filter(|(u, _)| *u).count();
+        assert_eq!(Some(used as u64), v["samples_used"].as_u64(), "{precision}");
+        let rejected: Vec<usize> = (0..300).filter(|&i| flags[i].1 == "rejected").collect();
+        assert_eq!(rejected, [39, 142], "{precision}");
+        // The calibrated columns are those of a run without --flags.
+        let plain = magcal(&["apply", &cal, &path], None);
+        let (_, with) = csv(&r.stdout);
+        let (_, without) = csv(&plain.stdout);
+        for (a, b) in with.iter().zip(&without) {
+            assert_eq!(a[..3], b[..3]);
+        }
+    }
+
+    // With heading columns; the repeated row of the recording.
+    let imu = real("imu_gnss_1252.csv");
+    let cal = fitted(&imu, &[], "imu_flags.cal.json");
+    let v: Value = serde_json::from_slice(&std::fs::read(&cal).expect("cal")).expect("json");
+    let r = magcal(&["apply", &cal, &imu, "--flags"], None);
+    assert_eq!(r.stderr, IMU_NOTE);
+    assert!(r
+        .stdout
+        .starts_with("x,y,z,heading_deg,heading_smoothed_deg,used,class\n"));
+    let flags = flags_of(&r);
+    assert_eq!(flags.len(), 1252);
+    let used = flags.iter().filter(|(u, _)| *u).count() as u64;
+    assert_eq!(Some(used), v["samples_used"].as_u64());
+    assert_eq!(flags[1051].1, "dropped:repeated");
+
+    // Rows the rules drop, in a file the fit never saw.
+    let icm_cal = fitted(&path, &[], "flags_drops.cal.json");
+    let data = temp_file(
+        "flags_drops.csv",
+        b"-231,29,161\n-231,29,161\nnan,1,2\n0,0,0\n1e308,0,0\n-157,-52,-141\n",
+    );
+    let classes: Vec<String> = flags_of(&magcal(&["apply", &icm_cal, &data, "--flags"], None))
+        .into_iter()
+        .map(|(_, c)| c)
+        .collect();
     assert_eq!(
-        (v["samples_used"].as_u64(), v["samples_dropped"].as_u64()),
-        (Some(300), Some(1))
+        classes,
+        [
+            "used",
+            "dropped:repeated",
+            "dropped:non_finite",
+            "dropped:zero",
+            "dropped:overflow",
+            "rejected",
+        ]
     );
 }
 
 #[test]
-#[ignore = "needs the core's overflow rule"]
-fn one_absurd_row_does_not_refuse_the_file() {
-    // Today the f64 fit refuses the whole file (exit 3: the sample spread
-    // overflows); the core is to drop such a row instead.
-    let v = magcal(&["fit", "-", "--format", "json"], Some(&with_absurd_row())).json();
-    assert_eq!(v["samples_used"], 300);
-    let b = vec3(&v["hard_iron"]);
-    for (got, want) in b.iter().zip(MAGNETO_B) {
-        assert!((got - want).abs() < 15.0, "{b:?}");
+fn apply_flags_read_older_calibrations() {
+    let path = real("icm20948_mag_300.csv");
+    let cal = fitted(&path, &[], "flags_new.cal.json");
+    let mut v: Value = serde_json::from_slice(&std::fs::read(&cal).expect("cal")).expect("json");
+    // A calibration written before outlier handling: no selection, no
+    // counts; apply without --flags reads it as before.
+    let object = v.as_object_mut().expect("object");
+    for key in [
+        "selection",
+        "drops",
+        "screened",
+        "rejected",
+        "robust",
+        "robust_passes",
+    ] {
+        object.remove(key);
+    }
+    let old = temp_file("flags_old.cal.json", v.to_string().as_bytes());
+    let r = magcal(&["apply", &old, &path], None);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.is_empty(), "{}", r.stderr);
+    assert_eq!(r.stdout, magcal(&["apply", &cal, &path], None).stdout);
+    // With --flags: every finite row used, and a note says why.
+    let data = temp_file("flags_old.csv", b"-231,29,161\nnan,1,2\n-231,29,161\n");
+    let r = magcal(&["apply", &old, &data, "--flags"], None);
+    assert_eq!(
+        r.stderr,
+        format!(
+            "magcal: note: {old} has no 'selection' (written before outlier handling): \
+             --flags marks every finite row used\n"
+        )
+    );
+    let classes: Vec<String> = flags_of(&r).into_iter().map(|(_, c)| c).collect();
+    assert_eq!(classes, ["used", "dropped:non_finite", "used"]);
+
+    // A damaged selection is an error with --flags, ignored without.
+    v["selection"] = serde_json::json!({
+        "glitch_rules": true,
+        "clip_levels": [[null, null], [null, null], [null, null]],
+        "screen": {"centre": [0, 0], "radius": 5},
+        "residual_limit": null
+    });
+    let bad = temp_file("flags_bad.cal.json", v.to_string().as_bytes());
+    magcal(&["apply", &bad, &path, "--flags"], None)
+        .fails_with(2, "flags_bad.cal.json: 'selection.screen' must be null or");
+    assert_eq!(magcal(&["apply", &bad, &path], None).code, 0);
+    v["selection"] = plain_selection();
+    v["precision"] = "f16".into();
+    let bad = temp_file("flags_precision.cal.json", v.to_string().as_bytes());
+    magcal(&["apply", &bad, &path, "--flags"], None)
+        .fails_with(2, "'precision' must be \"f32\" or \"f64\"");
+}
+
+#[test]
+fn plot_marks_the_rows_the_fit_did_not_use() {
+    let (bytes, _) = with_spikes();
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("spikes.svg");
+    let out = out.display().to_string();
+    let v = magcal(
+        &["fit", "-", "--plot", &out, "--format", "json"],
+        Some(&bytes),
+    )
+    .json();
+    assert_eq!(counts(&v), [298, 0, 2, 5]);
+    let svg = std::fs::read_to_string(&out).expect("plot written");
+    assert!(
+        svg.contains("305 rows: 298 used, 0 dropped, 2 screened, 5 rejected;"),
+        "{svg}"
+    );
+    // One path of crosses per class in each of the four panels: 5 rejected
+    // (x) and 2 screened (+) rows each, plus one mark in the legend.
+    assert_eq!(svg.matches("<path class=\"rejected\"").count(), 4);
+    assert_eq!(svg.matches("<path class=\"screened\"").count(), 4);
+    assert_eq!(svg.matches("l8 8m0 -8l-8 8").count(), 4 * 5 + 1);
+    assert_eq!(svg.matches("h10M").count(), 4 * 2 + 1);
+    assert!(svg.contains("rejected (5): |W (y \u{2212} b)| off 1 by &gt; 0.0"));
+    for n in svg_coordinates(&svg) {
+        let v: f64 = n.parse().unwrap_or_else(|_| panic!("coordinate {n:?}"));
+        assert!(v.is_finite(), "{n}");
     }
 }

@@ -7,17 +7,22 @@
 //! CRLF and lone CR; a UTF-8 BOM; UTF-16 with and without BOM; valid
 //! ellipsoid data with corruption), and a valid command line:
 //! `magcal fit` (every method and LS variant, both precisions, json and
-//! text, sometimes `--columns`, `--noise-std`, `--plot`) or `magcal apply`
-//! (a valid calibration or a corrupt one, sometimes `--columns`,
-//! `--accel-columns`, `--window`, `--scaled`), reading the file by path or
-//! from stdin.
+//! text, sometimes `--columns`, `--noise-std`, `--plot`, `--plain`) or
+//! `magcal apply` (a valid calibration or a corrupt one, sometimes
+//! `--columns`, `--accel-columns`, `--window`, `--scaled`, `--flags`),
+//! reading the file by path or from stdin.
 //!
 //! Checked per run: the process exits (no signal) with 0, 2 or 3 (`apply`:
 //! 0 or 2), never 101; on 2 or 3 stderr is exactly one line starting with
 //! `magcal: `; on 0 stderr is empty (or, for `fit --format json` and
-//! `apply`, the one line `magcal: note: columns ...` naming the columns
-//! found in the header) and stdout is well formed (one JSON
-//! object with finite numbers, a text report, or CSV with its header).
+//! `apply`, the line `magcal: note: columns ...` naming the columns found
+//! in the header, and for `apply --flags` the note that the calibration
+//! has no `selection`) and stdout is well formed: one JSON object with
+//! finite numbers whose row counts agree (drops by rule add up to
+//! `samples_dropped`, the outlier share is the screened and rejected rows'
+//! share, `--plain` screens and rejects nothing) and whose `selection` is
+//! well formed; a text report with its `samples` line; or CSV with its
+//! header, and with `--flags` a `used` flag matching each row's class.
 //!
 //! Environment:
 //! - `MAGCAL_FUZZ_CLI_CASES`: runs (default 1000, a few seconds);
@@ -450,6 +455,10 @@ struct Run {
     stdin: Option<Vec<u8>>,
     apply: bool,
     json: bool,
+    /// `fit --plain`.
+    plain: bool,
+    /// `apply --flags`.
+    flags: bool,
     description: String,
 }
 
@@ -470,7 +479,7 @@ fn build_run(rng: &mut Rng, dir: &std::path::Path, valid_cal: &[u8]) -> Run {
         names.join(",")
     };
     let apply = rng.chance(0.3);
-    let mut json = false;
+    let (mut json, mut plain, mut flags) = (false, false, false);
     let mut args: Vec<String> = Vec::new();
     if apply {
         let cal = dir.join("cal.json");
@@ -487,6 +496,10 @@ fn build_run(rng: &mut Rng, dir: &std::path::Path, valid_cal: &[u8]) -> Run {
         }
         if rng.chance(0.3) {
             args.push("--scaled".into());
+        }
+        flags = rng.chance(0.4);
+        if flags {
+            args.push("--flags".into());
         }
     } else {
         let method = *rng.pick(&["ls", "submle", "adc1", "adc2", "adc2-iter"]);
@@ -515,6 +528,10 @@ fn build_run(rng: &mut Rng, dir: &std::path::Path, valid_cal: &[u8]) -> Run {
         if rng.chance(0.1) {
             args.extend(["--plot".into(), dir.join("plot.svg").display().to_string()]);
         }
+        plain = rng.chance(0.2);
+        if plain {
+            args.push("--plain".into());
+        }
     }
     let description = format!(
         "{kind} input ({} bytes), via stdin: {via_stdin}",
@@ -525,6 +542,8 @@ fn build_run(rng: &mut Rng, dir: &std::path::Path, valid_cal: &[u8]) -> Run {
         stdin: via_stdin.then_some(bytes),
         apply,
         json,
+        plain,
+        flags,
         description,
     }
 }
@@ -564,8 +583,18 @@ fn run_and_check(run: &Run) -> Result<i32, String> {
         }
         return Ok(code);
     }
-    let note = stderr.lines().count() == 1 && stderr.starts_with("magcal: note: columns ");
-    if !stderr.is_empty() && !(note && (run.apply || run.json)) {
+    // The notes a success may print, in this order, each at most once.
+    let mut notes = stderr.lines().peekable();
+    if run.apply || run.json {
+        notes.next_if(|l| l.starts_with("magcal: note: columns "));
+    }
+    if run.flags {
+        notes.next_if(|l| {
+            l.starts_with("magcal: note: ")
+                && l.ends_with(" has no 'selection' (written before outlier handling): --flags marks every finite row used")
+        });
+    }
+    if notes.next().is_some() || !(stderr.is_empty() || stderr.ends_with('\n')) {
         return Err(format!("exit 0 with stderr {stderr:?}"));
     }
     if run.apply {
@@ -574,6 +603,9 @@ fn run_and_check(run: &Run) -> Result<i32, String> {
                 "apply: stdout {:?}",
                 &stdout[..stdout.len().min(200)]
             ));
+        }
+        if run.flags {
+            check_flags(&stdout)?;
         }
     } else if run.json {
         let v: Value = serde_json::from_str(&stdout).map_err(|e| format!("json: {e}: {stdout}"))?;
@@ -592,10 +624,131 @@ fn run_and_check(run: &Run) -> Result<i32, String> {
         {
             return Err(format!("json without finite parameters: {stdout}"));
         }
-    } else if stdout.trim().is_empty() {
-        return Err("text: empty stdout".into());
+        check_counts(&v, run.plain).map_err(|e| format!("{e}: {stdout}"))?;
+    } else if !stdout.contains("\n  samples       ") || !stdout.contains(" used of ") {
+        return Err(format!("text without its samples line: {stdout:?}"));
     }
     Ok(code)
+}
+
+/// The row counts, figures and selection of a fit JSON agree.
+fn check_counts(v: &Value, plain: bool) -> Result<(), String> {
+    let count = |key: &str| v[key].as_u64().ok_or(format!("no count {key}"));
+    let [used, dropped, screened, rejected] = [
+        count("samples_used")?,
+        count("samples_dropped")?,
+        count("screened")?,
+        count("rejected")?,
+    ];
+    let drops = v["drops"].as_object().ok_or("no drops object")?;
+    let rules = [
+        "non_finite",
+        "overflow",
+        "zero",
+        "rails",
+        "repeated",
+        "clipped",
+    ];
+    let mut by_rule = 0;
+    for rule in rules {
+        by_rule += drops
+            .get(rule)
+            .and_then(Value::as_u64)
+            .ok_or(format!("no drops.{rule}"))?;
+    }
+    if drops.len() != rules.len() || by_rule != dropped {
+        return Err(format!("drops {drops:?} vs samples_dropped {dropped}"));
+    }
+    if v["robust"].as_bool() != Some(!plain) || v["robust_passes"].as_u64().is_none() {
+        return Err("robust / robust_passes".into());
+    }
+    let q = &v["quality"];
+    let figure = |key: &str| {
+        q[key]
+            .as_f64()
+            .filter(|x| x.is_finite() && *x >= 0.0)
+            .ok_or(format!("quality.{key} not a finite non-negative number"))
+    };
+    let (_, _, share) = (
+        figure("fit_error")?,
+        figure("lack_of_fit")?,
+        figure("outlier_share")?,
+    );
+    let kept = used + screened + rejected;
+    if kept > 0 && (share - (screened + rejected) as f64 / kept as f64).abs() > 1e-6 {
+        return Err(format!("outlier_share {share} vs counts"));
+    }
+    let s = &v["selection"];
+    let glitch_rules = s["glitch_rules"]
+        .as_bool()
+        .ok_or("selection.glitch_rules")?;
+    let levels = s["clip_levels"]
+        .as_array()
+        .filter(|a| {
+            a.len() == 3
+                && a.iter().all(|p| {
+                    p.as_array().is_some_and(|p| {
+                        p.len() == 2 && p.iter().all(|l| l.is_null() || l.is_f64() || l.is_i64())
+                    })
+                })
+        })
+        .ok_or("selection.clip_levels")?;
+    let screen = &s["screen"];
+    let screen_ok = screen.is_null()
+        || (screen["centre"].as_array().is_some_and(|c| c.len() == 3)
+            && screen["radius"].as_f64().is_some_and(|r| r >= 0.0));
+    let limit = &s["residual_limit"];
+    if !screen_ok || !(limit.is_null() || limit.as_f64().is_some_and(|l| l >= 0.0)) {
+        return Err("selection.screen / residual_limit".into());
+    }
+    if plain
+        && (screened + rejected > 0
+            || glitch_rules
+            || !screen.is_null()
+            || !limit.is_null()
+            || levels
+                .iter()
+                .filter_map(Value::as_array)
+                .flatten()
+                .any(|l| !l.is_null()))
+    {
+        return Err("--plain screened, rejected or applied glitch rules".into());
+    }
+    Ok(())
+}
+
+/// The `used` and `class` columns of `apply --flags` agree on every row.
+fn check_flags(stdout: &str) -> Result<(), String> {
+    let mut lines = stdout.lines();
+    let header = lines.next().unwrap_or_default();
+    if !header.ends_with(",used,class") {
+        return Err(format!("--flags header {header:?}"));
+    }
+    let width = header.split(',').count();
+    for line in lines {
+        let fields: Vec<&str> = line.split(',').collect();
+        let ok = fields.len() == width
+            && match fields[width - 2..] {
+                ["1", "used"] => true,
+                ["0", "screened" | "rejected"] => true,
+                ["0", class] => class.strip_prefix("dropped:").is_some_and(|rule| {
+                    [
+                        "non_finite",
+                        "overflow",
+                        "zero",
+                        "rails",
+                        "repeated",
+                        "clipped",
+                    ]
+                    .contains(&rule)
+                }),
+                _ => false,
+            };
+        if !ok {
+            return Err(format!("--flags row {line:?}"));
+        }
+    }
+    Ok(())
 }
 
 fn env_u64(name: &str) -> Option<u64> {
@@ -608,7 +761,10 @@ fn env_u64(name: &str) -> Option<u64> {
     Some(parsed.unwrap_or_else(|_| panic!("{name}={v} is not a number")))
 }
 
-/// A valid calibration file: `magcal fit --format json` on clean data.
+/// A valid calibration file: `magcal fit --format json` on clean data,
+/// its wall time replaced by a constant (the corrupt variants cut and
+/// change bytes at positions drawn from the case: a time of another length
+/// would shift them, and the outcomes would vary from run to run).
 fn valid_calibration(dir: &std::path::Path) -> Vec<u8> {
     let mut rng = Rng(host_tests::sim::Rng(7));
     let rows = ellipsoid_rows(&mut rng, 300);
@@ -625,7 +781,11 @@ fn valid_calibration(dir: &std::path::Path) -> Vec<u8> {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    out.stdout
+    let text = String::from_utf8(out.stdout).expect("JSON is UTF-8");
+    let key = "\"timing_us\":";
+    let start = text.find(key).expect("timing_us") + key.len();
+    let end = start + text[start..].find(',').expect("a field after timing_us");
+    format!("{}100.0{}", &text[..start], &text[end..]).into_bytes()
 }
 
 #[test]

@@ -1,0 +1,313 @@
+//! Which rows a fit used, as the JSON of `fit --format json` carries it and
+//! `apply --flags` reads it back: the drop counts by rule, the core's
+//! [`Selection`] in JSON form, and the names of the row classes.
+//!
+//! The JSON form (`selection` object):
+//!
+//! ```json
+//! {"glitch_rules": true,
+//!  "clip_levels": [[null, 512], [null, null], [-480, null]],
+//!  "screen": {"centre": [x, y, z], "radius": r},
+//!  "residual_limit": 0.094}
+//! ```
+//!
+//! `screen` and `residual_limit` are `null` when the fit did not screen or
+//! weight its rows (a clean plain fit, or `--plain`). With `glitch_rules`
+//! false and everything else `null` it is [`Selection::ALL`]: every finite
+//! row used.
+
+use mag_cal_core::{Drops, Real, Rule, SampleClass, Selection};
+use serde::ser::SerializeMap;
+use serde::{Serialize, Serializer};
+use serde_json::Value;
+
+/// Every drop rule of the core, in the order of [`Drops`]' fields.
+pub const RULES: [Rule; 6] = [
+    Rule::NonFinite,
+    Rule::Overflow,
+    Rule::Zero,
+    Rule::Rails,
+    Rule::Repeated,
+    Rule::Clipped,
+];
+
+/// Rows `drops` counts for `rule`. The match is exhaustive: a new core
+/// rule fails to compile here until [`RULES`] has it.
+pub fn drop_count(drops: &Drops, rule: Rule) -> usize {
+    match rule {
+        Rule::NonFinite => drops.non_finite,
+        Rule::Overflow => drops.overflow,
+        Rule::Zero => drops.zero,
+        Rule::Rails => drops.rails,
+        Rule::Repeated => drops.repeated,
+        Rule::Clipped => drops.clipped,
+    }
+}
+
+/// The rows dropped by each rule, serialised as a JSON object keyed by
+/// [`Rule::name`] (every rule present, zeros included).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DropCounts(pub Drops);
+
+impl DropCounts {
+    /// `(rule, rows)` for every rule, in [`RULES`] order.
+    pub fn by_rule(&self) -> impl Iterator<Item = (Rule, usize)> + '_ {
+        RULES.into_iter().map(|r| (r, drop_count(&self.0, r)))
+    }
+}
+
+impl Serialize for DropCounts {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut map = serializer.serialize_map(Some(RULES.len()))?;
+        for (rule, n) in self.by_rule() {
+            map.serialize_entry(rule.name(), &n)?;
+        }
+        map.end()
+    }
+}
+
+/// The screening ball of a fit: rows farther than `radius` from `centre`
+/// (sensor units) were screened out.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Screen {
+    /// Centre, sensor units.
+    pub centre: [f64; 3],
+    /// Radius, sensor units.
+    pub radius: f64,
+}
+
+/// The core's [`Selection`] widened to `f64`: the `selection` object of the
+/// fit JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SelectionJson {
+    /// The zero, rails, repetition and clip rules were applied.
+    pub glitch_rules: bool,
+    /// Per axis the low and high clip level (`null`: none).
+    pub clip_levels: [[Option<f64>; 2]; 3],
+    /// The screening ball, if the fit screened.
+    pub screen: Option<Screen>,
+    /// Rows whose `||W (y - b)| - 1|` exceeds this were rejected.
+    pub residual_limit: Option<f64>,
+}
+
+impl SelectionJson {
+    /// Every finite row used ([`Selection::ALL`]).
+    pub const ALL: Self = Self {
+        glitch_rules: false,
+        clip_levels: [[None; 2]; 3],
+        screen: None,
+        residual_limit: None,
+    };
+
+    /// The core's selection, widened to `f64` (exactly).
+    pub fn from_core<T: Real>(s: &Selection<T>) -> Self {
+        Self {
+            glitch_rules: s.glitch_rules,
+            clip_levels: s.clip_levels.map(|axis| axis.map(|l| l.map(T::to_f64))),
+            screen: s.screen.map(|(centre, radius)| Screen {
+                centre: centre.map(T::to_f64),
+                radius: radius.to_f64(),
+            }),
+            residual_limit: s.residual_limit.map(T::to_f64),
+        }
+    }
+
+    /// The core's selection in precision `T` (exact for values that came
+    /// from `T`).
+    pub fn to_core<T: Real>(self) -> Selection<T> {
+        Selection {
+            glitch_rules: self.glitch_rules,
+            clip_levels: self.clip_levels.map(|axis| axis.map(|l| l.map(T::lit))),
+            screen: self
+                .screen
+                .map(|s| (s.centre.map(T::lit), T::lit(s.radius))),
+            residual_limit: self.residual_limit.map(T::lit),
+        }
+    }
+
+    /// Reads the `selection` object of a fit JSON; the error names the
+    /// offending field (`selection.screen.radius must be ...`).
+    pub fn from_json(v: &Value) -> Result<Self, String> {
+        let obj = v
+            .as_object()
+            .ok_or("'selection' must be an object".to_owned())?;
+        let get = |key: &str| {
+            obj.get(key)
+                .ok_or(format!("missing field 'selection.{key}'"))
+        };
+        let glitch_rules = get("glitch_rules")?
+            .as_bool()
+            .ok_or("'selection.glitch_rules' must be true or false".to_owned())?;
+        let level = |v: &Value| -> Option<Option<f64>> {
+            match v {
+                Value::Null => Some(None),
+                v => v.as_f64().map(Some),
+            }
+        };
+        let pair = |v: &Value| -> Option<[Option<f64>; 2]> {
+            let a = v.as_array().filter(|a| a.len() == 2)?;
+            Some([level(&a[0])?, level(&a[1])?])
+        };
+        let clip_levels = get("clip_levels")?
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .and_then(|a| Some([pair(&a[0])?, pair(&a[1])?, pair(&a[2])?]))
+            .ok_or(
+                "'selection.clip_levels' must be 3 pairs [low, high] of numbers or null".to_owned(),
+            )?;
+        let screen = match get("screen")? {
+            Value::Null => None,
+            v => {
+                let bad = || {
+                    "'selection.screen' must be null or {\"centre\": [x, y, z], \"radius\": r} \
+                     with a positive radius"
+                        .to_owned()
+                };
+                let centre = v
+                    .get("centre")
+                    .and_then(Value::as_array)
+                    .filter(|a| a.len() == 3)
+                    .and_then(|a| Some([a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?]))
+                    .ok_or_else(bad)?;
+                let radius = v
+                    .get("radius")
+                    .and_then(Value::as_f64)
+                    .filter(|r| *r >= 0.0)
+                    .ok_or_else(bad)?;
+                Some(Screen { centre, radius })
+            }
+        };
+        let residual_limit = match get("residual_limit")? {
+            Value::Null => None,
+            v => Some(v.as_f64().filter(|l| *l >= 0.0).ok_or(
+                "'selection.residual_limit' must be null or a non-negative number".to_owned(),
+            )?),
+        };
+        Ok(Self {
+            glitch_rules,
+            clip_levels,
+            screen,
+            residual_limit,
+        })
+    }
+}
+
+/// The name of a row class in `apply --flags`: `used`, `dropped:<rule>`
+/// (the rule's [`Rule::name`]), `screened`, `rejected`.
+pub fn class_name(class: SampleClass) -> String {
+    match class {
+        SampleClass::Used => "used".into(),
+        SampleClass::Dropped(rule) => format!("dropped:{}", rule.name()),
+        SampleClass::Screened => "screened".into(),
+        SampleClass::Rejected => "rejected".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drops_serialise_by_rule_name() {
+        let drops = Drops {
+            non_finite: 1,
+            repeated: 4,
+            ..Drops::default()
+        };
+        let v = serde_json::to_value(DropCounts(drops)).expect("serialises");
+        assert_eq!(
+            v,
+            serde_json::json!({"non_finite": 1, "overflow": 0, "zero": 0, "rails": 0,
+                               "repeated": 4, "clipped": 0})
+        );
+        let names: Vec<&str> = RULES.iter().map(|r| r.name()).collect();
+        assert_eq!(
+            names,
+            [
+                "non_finite",
+                "overflow",
+                "zero",
+                "rails",
+                "repeated",
+                "clipped"
+            ]
+        );
+    }
+
+    #[test]
+    fn selection_round_trips_through_json_exactly() {
+        let core = Selection::<f32> {
+            glitch_rules: true,
+            clip_levels: [[None, Some(512.0)], [None, None], [Some(-480.25), None]],
+            screen: Some(([1.5, -2.0, 0.1], 812.3)),
+            residual_limit: Some(0.0946),
+        };
+        let json = SelectionJson::from_core(&core);
+        let text = serde_json::to_string(&json).expect("serialises");
+        let back = SelectionJson::from_json(&serde_json::from_str(&text).expect("json"))
+            .expect("reads back");
+        assert_eq!(back, json);
+        assert_eq!(back.to_core::<f32>(), core);
+        assert_eq!(SelectionJson::ALL.to_core::<f64>(), Selection::<f64>::ALL);
+        let plain = serde_json::to_value(SelectionJson::ALL).expect("serialises");
+        assert_eq!(
+            plain,
+            serde_json::json!({"glitch_rules": false,
+                               "clip_levels": [[null, null], [null, null], [null, null]],
+                               "screen": null, "residual_limit": null})
+        );
+    }
+
+    #[test]
+    fn bad_selections_name_the_field() {
+        let ok = r#"{"glitch_rules":true,"clip_levels":[[null,1],[null,null],[2,null]],"screen":{"centre":[0,0,0],"radius":5},"residual_limit":0.1}"#;
+        assert!(SelectionJson::from_json(&serde_json::from_str(ok).expect("json")).is_ok());
+        for (text, reason) in [
+            ("[]", "'selection' must be an object"),
+            ("{}", "missing field 'selection.glitch_rules'"),
+            (
+                r#"{"glitch_rules":1,"clip_levels":[],"screen":null,"residual_limit":null}"#,
+                "glitch_rules' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4]],"screen":null,"residual_limit":null}"#,
+                "clip_levels' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,"6"]],"screen":null,"residual_limit":null}"#,
+                "clip_levels' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":{"centre":[0,0]},"residual_limit":null}"#,
+                "'selection.screen' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":{"centre":[0,0,0],"radius":-1},"residual_limit":null}"#,
+                "'selection.screen' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":"0.1"}"#,
+                "residual_limit' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null}"#,
+                "missing field 'selection.residual_limit'",
+            ),
+        ] {
+            let err = SelectionJson::from_json(&serde_json::from_str(text).expect("json"))
+                .expect_err(text);
+            assert!(err.contains(reason), "{text}: {err}");
+        }
+    }
+
+    #[test]
+    fn class_names() {
+        assert_eq!(class_name(SampleClass::Used), "used");
+        assert_eq!(class_name(SampleClass::Screened), "screened");
+        assert_eq!(class_name(SampleClass::Rejected), "rejected");
+        assert_eq!(
+            class_name(SampleClass::Dropped(Rule::NonFinite)),
+            "dropped:non_finite"
+        );
+    }
+}
