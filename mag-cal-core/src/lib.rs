@@ -457,10 +457,16 @@ fn finish<T: Real, S: Sample>(
     let distortion = quality::distortion(&est.w)?;
     figures.distortion = Some(distortion);
     let calibration = Calibration::from_normalised_w(norm, &est.w, &est.centre)?;
-    let limit = est
-        .sigma
-        .filter(|_| start.weights.sigma.is_some())
-        .map(|s| s * T::lit(methods::OUTLIER_CUT));
+    // The rows the estimate used: with weights, those within the cut of the
+    // method's last pass (lagged, as its weights); for LS alone, the robust
+    // LS's own cut; subMLE used every row inside the screening.
+    let sigma = match (start.weights.sigma, est.sigma) {
+        (None, _) => None,
+        (Some(_), Some(s)) => Some(s),
+        (Some(s), None) if config.method == Method::Ls => Some(s),
+        (Some(_), None) => None,
+    };
+    let limit = sigma.map(|s| s * T::lit(methods::OUTLIER_CUT));
     let last = match quality::final_pass(
         samples,
         norm,
