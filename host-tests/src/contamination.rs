@@ -411,6 +411,13 @@ pub enum Kind {
     /// one clipped, so every clipped value moves towards the centre. (A real
     /// lower range would clip every row beyond it, about half of them.)
     ClipSaturation,
+    /// A sensor range that ends below the field on one side of one axis:
+    /// every row beyond a level is clipped to it (the level is the one
+    /// that clips the fraction of the rows), as a saturating axis does.
+    /// Unlike [`Kind::ClipSaturation`], the clipped rows share the axis's
+    /// extreme value. Rows already at the level (ties in counts) stay as
+    /// they are, so a few fewer rows than the fraction may change.
+    RangeClip,
     /// Rows set to exactly `(0, 0, 0)`.
     Zeros,
     /// A stuck sensor: a row repeated 5 to 20 times in place of the rows
@@ -432,10 +439,11 @@ pub enum Kind {
 
 impl Kind {
     /// Every kind, in the order of the tables.
-    pub const ALL: [Kind; 9] = [
+    pub const ALL: [Kind; 10] = [
         Kind::Spike,
         Kind::RailSaturation,
         Kind::ClipSaturation,
+        Kind::RangeClip,
         Kind::Zeros,
         Kind::Stuck,
         Kind::Displace03,
@@ -450,6 +458,7 @@ impl Kind {
             Kind::Spike => "spike",
             Kind::RailSaturation => "rail",
             Kind::ClipSaturation => "clip",
+            Kind::RangeClip => "range-clip",
             Kind::Zeros => "zeros",
             Kind::Stuck => "stuck",
             Kind::Displace03 => "displace-0.3",
@@ -628,6 +637,27 @@ pub fn contaminate(run: &CleanRun, kind: Kind, fraction: f64, rng: &mut Rng) -> 
                 let centre = 0.5 * (lo + hi);
                 y[i][a] = if clean[i][a] >= centre { hi } else { lo };
                 marked[i] = y[i] != clean[i];
+            }
+        }
+        Kind::RangeClip => {
+            let a = rng.index(3);
+            let high = rng.chance(0.5);
+            // Rows by how far they reach on that side; the k farthest are
+            // clipped to the value of the next one.
+            let mut order: Vec<usize> = (0..n).collect();
+            let key = |i: usize| if high { -clean[i][a] } else { clean[i][a] };
+            order.sort_by(|&p, &q| key(p).total_cmp(&key(q)));
+            if let Some(&edge) = order.get(k) {
+                let level = clean[edge][a];
+                let level = if units == Units::Counts {
+                    level.round()
+                } else {
+                    level
+                };
+                for &i in order.iter().take(k) {
+                    y[i][a] = level;
+                    marked[i] = y[i] != clean[i];
+                }
             }
         }
         Kind::Zeros => {
