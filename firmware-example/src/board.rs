@@ -19,7 +19,7 @@
 use core::marker::PhantomData;
 
 use crate::storage::FlashStorage;
-use crate::{BootOutcome, Truth};
+use crate::{BootOutcome, GlitchKind, Truth};
 use defmt_rtt as _;
 use microbit::hal::nvmc::Nvmc;
 use microbit::hal::{twim, Timer, Twim};
@@ -166,6 +166,16 @@ impl Bench<'_> {
 
     /// Unknown on hardware.
     pub fn injected(&self) -> Option<[u32; 4]> {
+        None
+    }
+
+    /// Unknown on hardware.
+    pub fn latched_glitch(&self) -> Option<GlitchKind> {
+        None
+    }
+
+    /// Unknown on hardware.
+    pub fn injected_glitches(&self) -> Option<[u32; 2]> {
         None
     }
 }

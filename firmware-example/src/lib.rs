@@ -12,8 +12,10 @@
 //!   calibration is off;
 //! - `faults` (with `qemu`): the simulated sensor misbehaves on a schedule
 //!   (`sim::Faults::RUN`: NACK bursts, stuck output, saturation, a passing
-//!   magnet) and the run ends with a summary line of the faults seen and
-//!   handled. The application's fault handling is the same in every build.
+//!   magnet, and isolated glitches: wild readings and displaced ones, the
+//!   latter left to the core's outlier handling) and the run ends with
+//!   summary lines of the glitches and of the faults seen and handled. The
+//!   application's fault handling is the same in every build.
 //!
 //! The flow at each boot: initialise the sensor through the unmodified
 //! `lsm303agr` driver (retrying I2C failures, [`faults`]); load the stored
@@ -60,6 +62,19 @@ pub struct Truth {
     pub soft_iron: Matrix3<f32>,
     /// `rho = |det T|^(1/3)`, counts.
     pub field_strength: f32,
+}
+
+/// A glitch the simulator injected into a reading (its truth about it, for
+/// the fault run's self-check; never known on the board): isolated
+/// readings the fault monitor's episode tests cannot see
+/// (`sim::Glitches`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum GlitchKind {
+    /// Thousands of counts off, before the disturbance test has a
+    /// reference.
+    Wild,
+    /// Displaced by a share of the field below the monitor's threshold.
+    Displaced,
 }
 
 /// What the application did about the calibration at one boot.

@@ -62,15 +62,31 @@
 //!   (smooth rise and fall, like a dipole approaching and leaving);
 //! - stuck output: only marked here ([`Injected::stuck`]); the register
 //!   model ([`crate::sim_sensor`]) then leaves the output registers
-//!   unchanged while STATUS still reports new data.
+//!   unchanged while STATUS still reports new data;
+//! - glitches (collections only, [`Glitches`]): isolated readings that
+//!   the fault monitor's episode tests (repeats, rails, the norm against a
+//!   reference) cannot see: a few *wild* readings (thousands of counts
+//!   off, inside the range) among the first readings of a collection,
+//!   before the disturbance test has a reference, and *displaced* readings
+//!   (a fixed share of the field added in a pseudo-random direction)
+//!   throughout the sweep, too small for the disturbance threshold. They
+//!   are marked ([`Injected::glitch`]) but are no fault in the sense of
+//!   [`Injected::any`]: they may reach the collector, and the fault run
+//!   checks that the calibration did not use them, not that they never
+//!   arrived. (The firmware drops the wild ones with a reference-free test
+//!   of its own, because the core's collector cannot take them; the
+//!   displaced ones are the core's to leave out.)
 //!
 //! I2C NACK bursts are purely a bus matter and live in the register model.
 //! The windows count samples from the start of a motion phase, so every
 //! collection (a [`Motion::Sweep`]) and every compass swing
 //! ([`Motion::LevelTurn`]) meets the same faults. Each reading says which
 //! faults it carries ([`Reading::injected`]), and the simulator counts the
-//! episodes it injected ([`Simulator::injected`]), so the fault run can
-//! check the firmware against the truth.
+//! episodes (and glitches) it injected ([`Simulator::injected`]), so the
+//! fault run can check the firmware against the truth. The displacements'
+//! pseudo-random directions come from their own hash of the seed and the
+//! sample, not from the noise generator, so the noise of every reading is
+//! the same with and without glitches.
 
 use core::f64::consts::PI;
 
@@ -157,6 +173,44 @@ impl PhaseFaults {
     };
 }
 
+/// A wild reading: an offset added to one sample of a collection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WildGlitch {
+    /// The sample of the phase (counted as in [`Window`]).
+    pub sample: u32,
+    /// Added to the reading, counts (the result stays inside +-32767, so
+    /// neither the monitor's rail test nor the core's rails rule sees it).
+    pub offset: [f64; 3],
+}
+
+/// Isolated glitches of a collection that the fault monitor's episode
+/// tests cannot see (see the module documentation). A glitch is injected only into a sample
+/// that carries no fault of its phase's windows (it is isolated).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Glitches {
+    /// Wild readings.
+    pub wild: &'static [WildGlitch],
+    /// Every `displaced_every`-th sample of the phase, from
+    /// `displaced_first` on, is displaced (0: none).
+    pub displaced_every: u32,
+    /// The first displaced sample.
+    pub displaced_first: u32,
+    /// Size of a displacement, in units of the field strength `F`
+    /// ([`Scenario::field_nt`] in counts), in a direction drawn uniformly
+    /// on the sphere.
+    pub displaced_share: f64,
+}
+
+impl Glitches {
+    /// No glitch.
+    pub const NONE: Glitches = Glitches {
+        wild: &[],
+        displaced_every: 0,
+        displaced_first: 0,
+        displaced_share: 0.0,
+    };
+}
+
 /// Sensor faults to inject.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Faults {
@@ -175,6 +229,8 @@ pub struct Faults {
     pub saturation_field: [f64; 3],
     /// Peak field of a disturbance, counts.
     pub disturbance_peak: [f64; 3],
+    /// Glitches during a [`Motion::Sweep`] (each collection).
+    pub sweep_glitches: Glitches,
 }
 
 impl Faults {
@@ -186,6 +242,7 @@ impl Faults {
         level_turn: PhaseFaults::NONE,
         saturation_field: [0.0; 3],
         disturbance_peak: [0.0; 3],
+        sweep_glitches: Glitches::NONE,
     };
 
     /// The fault run (`--features qemu,faults`): every class, in every
@@ -201,7 +258,31 @@ impl Faults {
     ///   the board) on x, beyond the +-32767 rail;
     /// - a magnet passing within a few cm: peak 1500 counts (225 uT, about
     ///   5 times the Earth's field) over 40 samples (2 s) of a collection
-    ///   and 30 of a swing.
+    ///   and 30 of a swing;
+    /// - glitches in each collection, which the monitor's episode tests
+    ///   cannot see (the firmware drops the wild ones with a test of its
+    ///   own):
+    ///   - 3 wild readings, at samples 4, 11 and 19, before the firmware's
+    ///     disturbance test arms (once the collector holds
+    ///     `faults::ARM_SAMPLES` = 30 samples: after sample 85 or so, the
+    ///     spiral starting slowly near the pole and the quarantine
+    ///     delaying every reading by `faults::GUARD` = 10): 2400-3200
+    ///     counts added on one to three axes, 7-10 times the field, far
+    ///     from the rails;
+    ///   - every 25th sample from sample 112 on displaced by 0.3 of the
+    ///     field (96 counts) in a pseudo-random direction: at most 0.3 on
+    ///     the monitor's statistic, whose clean spread on this soft iron
+    ///     is up to 0.22 (0.30 early in a collection), so with the 0.5
+    ///     threshold almost all pass (measured on the host, 1000 seeds:
+    ///     0.85 % of them reach 0.50-0.57, where the long and short axes
+    ///     of the soft iron meet an outward or inward displacement; the
+    ///     monitor then takes one for a disturbance); about 20 of them in
+    ///     a collection. Not earlier: the monitor's reference (the
+    ///     collector's running centre) arms on a cap of 30 samples, on
+    ///     which one displaced sample moves it so far that clean readings
+    ///     cross the threshold (from sample 12 on: 347 clean readings
+    ///     flagged over 1000 seeds, up to 0.72; from 112 on: none, at most
+    ///     0.31, the clean spread).
     ///
     /// The windows do not overlap and lie well inside the phases: a
     /// collection takes 600-700 samples, a swing 550.
@@ -229,7 +310,35 @@ impl Faults {
         },
         saturation_field: [45_000.0, 0.0, -4_000.0],
         disturbance_peak: [900.0, -720.0, 960.0],
+        sweep_glitches: Glitches {
+            wild: &[
+                WildGlitch {
+                    sample: 4,
+                    offset: [2_400.0, 0.0, 0.0],
+                },
+                WildGlitch {
+                    sample: 11,
+                    offset: [0.0, -2_000.0, 1_600.0],
+                },
+                WildGlitch {
+                    sample: 19,
+                    offset: [-1_800.0, 1_500.0, -2_200.0],
+                },
+            ],
+            displaced_every: 25,
+            displaced_first: 112,
+            displaced_share: 0.3,
+        },
     };
+}
+
+/// A glitch of a collection ([`Glitches`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Glitch {
+    /// A wild reading: thousands of counts off.
+    Wild,
+    /// A moderate displacement, below the monitor's threshold.
+    Displaced,
 }
 
 /// The faults a sample carries.
@@ -241,16 +350,20 @@ pub struct Injected {
     pub saturated: bool,
     /// A disturbance field was added.
     pub disturbed: bool,
+    /// A glitch was added: not a fault for [`Injected::any`] (it may reach
+    /// the collector, and the core is to leave it out).
+    pub glitch: Option<Glitch>,
 }
 
 impl Injected {
-    /// Whether any fault is present.
+    /// Whether any fault the monitor must keep out is present (stuck,
+    /// saturated, disturbed; not a glitch).
     pub fn any(&self) -> bool {
         self.stuck || self.saturated || self.disturbed
     }
 }
 
-/// Fault episodes injected so far, per class.
+/// Fault episodes (and glitches) injected so far, per class.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct InjectedCounts {
     /// NACK bursts (counted by the register model).
@@ -261,6 +374,10 @@ pub struct InjectedCounts {
     pub saturated: u32,
     /// Disturbance windows.
     pub disturbance: u32,
+    /// Wild readings ([`Glitch::Wild`]).
+    pub wild: u32,
+    /// Displaced readings ([`Glitch::Displaced`]).
+    pub displaced: u32,
 }
 
 /// What the simulated sensor is doing.
@@ -481,9 +598,35 @@ impl Simulator {
     }
 
     /// Fault episodes injected so far (stuck, saturation, disturbance; the
-    /// NACK count is the register model's).
+    /// NACK count is the register model's) and glitches.
     pub fn injected(&self) -> InjectedCounts {
         self.injected
+    }
+
+    /// The glitch of sample `k` of a collection, if any, and the field it
+    /// adds, counts; counts it.
+    fn glitch_at(&mut self, k: u32) -> Option<(Glitch, [f64; 3])> {
+        let g = self.scenario.faults.sweep_glitches;
+        if let Some(w) = g.wild.iter().find(|w| w.sample == k) {
+            self.injected.wild += 1;
+            return Some((Glitch::Wild, w.offset));
+        }
+        let displaced = g.displaced_every > 0
+            && k.checked_sub(g.displaced_first)
+                .is_some_and(|t| t.is_multiple_of(g.displaced_every));
+        if !displaced {
+            return None;
+        }
+        self.injected.displaced += 1;
+        // A direction uniform on the sphere from a hash of the seed and the
+        // sample (not from the noise generator).
+        let mut rng =
+            SplitMix64::new(self.scenario.seed ^ u64::from(k).wrapping_mul(0xd1b5_4a32_d192_ed03));
+        let z = 2.0 * rng.uniform() - 1.0;
+        let r = libm::sqrt(libm::fmax(0.0, 1.0 - z * z));
+        let (s, c) = libm::sincos(2.0 * PI * rng.uniform());
+        let size = g.displaced_share * self.scenario.field_nt / NT_PER_COUNT;
+        Some((Glitch::Displaced, [size * r * c, size * r * s, size * z]))
     }
 
     /// The faults of sample `k` of the current phase and the field they add,
@@ -514,6 +657,13 @@ impl Simulator {
             let s = libm::sin(PI * (f64::from(t) + 0.5) / f64::from(w.len));
             for (a, p) in field.iter_mut().zip(f.disturbance_peak) {
                 *a += p * s * s;
+            }
+        }
+        // Glitches: collections only, and only on samples free of faults.
+        if matches!(self.motion, Motion::Sweep) && !injected.any() {
+            if let Some((glitch, extra)) = self.glitch_at(k) {
+                injected.glitch = Some(glitch);
+                field = extra;
             }
         }
         (injected, field)

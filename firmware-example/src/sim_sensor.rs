@@ -58,6 +58,10 @@
 //!   registers, yet STATUS_REG_M reports new data as usual, so the driver
 //!   reads the previous sample again.
 //!
+//! Saturation, the passing magnet and the glitches (wild and displaced
+//! readings) are in the physics; [`Bench`] reports each latched sample's
+//! faults and glitch, and the counts injected, for the run's self-check.
+//!
 //! # Flash stand-in
 //!
 //! QEMU's mps2-an386 has no nRF52 NVMC (its "flash" is plain SRAM and there
@@ -77,9 +81,9 @@ use embedded_storage::nor_flash::{
 };
 use mag_cal_core::nalgebra::{Matrix3, Vector3};
 
-use crate::sim::{Faults, InjectedCounts, Motion, Reading, Scenario, Simulator};
+use crate::sim::{Faults, Glitch, InjectedCounts, Motion, Reading, Scenario, Simulator};
 use crate::storage::FlashStorage;
-use crate::{BootOutcome, Truth};
+use crate::{BootOutcome, GlitchKind, Truth};
 
 /// What this build runs on, for the log.
 pub const NAME: &str = "QEMU mps2-an386, simulated LSM303AGR";
@@ -698,6 +702,28 @@ impl Bench<'_> {
     pub fn injected(&self) -> Option<[u32; 4]> {
         let c = self.dev.borrow().injected();
         Some([c.nack, c.stuck, c.saturated, c.disturbance])
+    }
+
+    /// The glitch of the sample in the output registers, if it has one
+    /// (the truth; glitches are no faults for [`Bench::latched_faulty`]).
+    /// A stuck output shows the sample before, whose glitch was reported
+    /// when it was read.
+    pub fn latched_glitch(&self) -> Option<GlitchKind> {
+        let dev = self.dev.borrow();
+        let r = dev.latched()?;
+        if r.injected.stuck {
+            return None;
+        }
+        r.injected.glitch.map(|g| match g {
+            Glitch::Wild => GlitchKind::Wild,
+            Glitch::Displaced => GlitchKind::Displaced,
+        })
+    }
+
+    /// Glitches injected so far: wild, displaced (both 0 in the clean run).
+    pub fn injected_glitches(&self) -> Option<[u32; 2]> {
+        let c = self.dev.borrow().injected();
+        Some([c.wild, c.displaced])
     }
 
     /// The raw counts in the output registers (the last sample latched,
