@@ -21,14 +21,13 @@
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector};
 
-use crate::artificial::{Pass, Stats};
+use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
-use crate::histogram::LogHistogram;
 use crate::linalg::{
     cholesky, cholesky_inverse, from_array, min_max, sym_eigenvalues, sym_inv_sqrt, to_array,
 };
 use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
-use crate::methods::{robust_sigma, Estimate, Weights};
+use crate::methods::{weighted_stats, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
 use crate::quasi_newton::{bfgs, Minimum, Objective};
@@ -142,12 +141,7 @@ pub(crate) fn step<T: Real, S: Sample>(
     config: &Config,
     weights: &Weights<T>,
 ) -> Result<Estimate<T>, Error> {
-    let mut hist = LogHistogram::new();
-    let pass = Pass {
-        gate: &weights.gate,
-        limit: weights.limit(),
-    };
-    let (stats, res) = Stats::accumulate_with(samples, norm, &ls.centre, &ls.w, &pass, &mut hist)?;
+    let (stats, sigma, max) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?;
     let m = weighted_solve(&stats, norm, config)?;
     let th = theta(&m.x);
     let (dt, db) = split(&th);
@@ -159,7 +153,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         passes: 1,
         warnings: Warnings::NONE,
         directions: Some(DirectionSums::from(&stats)),
-        sigma: robust_sigma(&hist),
-        max_residual: Some(res.max),
+        sigma,
+        max_residual: Some(max),
     })
 }

@@ -20,11 +20,9 @@
 
 use nalgebra::{Matrix3, SVector, Vector3};
 
-use crate::artificial::{Pass, Stats};
 use crate::ellipsoid::Ellipsoid;
-use crate::histogram::LogHistogram;
 use crate::linalg::{cholesky, cholesky_inverse, from_array, sym_inv_sqrt, to_array};
-use crate::methods::{adc2, robust_sigma, Estimate, Weights};
+use crate::methods::{adc2, weighted_stats, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quasi_newton::Anderson;
 use crate::sample::Sample;
@@ -86,15 +84,10 @@ fn adc2_step<T: Real, S: Sample>(
 ) -> Result<(State<T>, Option<T>, T), Error> {
     let (w, b) = unpack(x);
     let t0 = inverse(&w)?;
-    let mut hist = LogHistogram::new();
-    let pass = Pass {
-        gate: &weights.gate,
-        limit: weights.limit(),
-    };
-    let (stats, res) = Stats::accumulate_with(samples, norm, &b, &w, &pass, &mut hist)?;
+    let (stats, sigma, max) = weighted_stats(samples, norm, &b, &w, weights)?;
     let sol = adc2::solve_closed_form(&stats, &t0, &b)?;
     let w_new = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
-    Ok((pack(&w_new, &sol.centre), robust_sigma(&hist), res.max))
+    Ok((pack(&w_new, &sol.centre), sigma, max))
 }
 
 /// The gauge-free size of a change from `a` to `b`:

@@ -3,6 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::artificial::{Pass, Stats};
 use crate::ellipsoid::Ellipsoid;
 use crate::histogram::LogHistogram;
 use crate::linalg::larger;
@@ -132,6 +133,26 @@ impl<T: Real> Weights<T> {
 /// for the same result; a 3-sigma cut cost 2-8 % of the clean accuracy,
 /// 3.5 sigma at most 2.2 % (design document, section 14).
 pub const OUTLIER_CUT: f64 = 3.5;
+
+/// The artificial-data pass under the start `(centre, w)` with the 0/1
+/// weights: the statistics, the robust sigma of the residuals of the rows
+/// the gate passed (`None` for the plain pass, which does not measure
+/// them), and the largest residual.
+pub(crate) fn weighted_stats<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    centre: &Vector3<T>,
+    w: &Matrix3<T>,
+    weights: &Weights<T>,
+) -> Result<(Stats<T>, Option<T>, T), Error> {
+    let mut hist = LogHistogram::new();
+    let pass = Pass {
+        gate: &weights.gate,
+        limit: weights.limit(),
+    };
+    let (stats, res) = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut hist)?;
+    Ok((stats, robust_sigma(&hist), res.max))
+}
 
 /// The robust standard deviation `1.4826 median|r|` of the residuals
 /// counted in `hist`, floored at `1024 eps` (below it rounding, not noise,
