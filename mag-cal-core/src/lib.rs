@@ -330,7 +330,9 @@ struct Start<T: Real> {
 }
 
 /// The plain pipeline: every row the scan kept, weight 1. Returns the fit
-/// and whether it is clean ([`CLEAN_LIMIT`]).
+/// and whether it is clean ([`CLEAN_LIMIT`]). Out of line, as the robust
+/// path: inlined, both paths' locals would share `pipeline`'s frame.
+#[inline(never)]
 fn plain_path<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
@@ -387,7 +389,9 @@ fn figures_misfit<T: Real>(fit: &Fit<T>, significant: bool, config: &Config) -> 
 }
 
 /// The robust pipeline (section 14 of the design document): screening, the
-/// robust LS fit, the method with 0/1 weights.
+/// robust LS fit, the method with 0/1 weights. Out of line (see
+/// [`plain_path`]).
+#[inline(never)]
 fn robust_path<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
@@ -415,7 +419,7 @@ fn robust_path<T: Real, S: Sample>(
     };
     let kept = fitted.moments.count();
     figures.flatness = Some(quality::flatness(&fitted.moments, kept)?);
-    figures.quadric_gap = quality::quadric_gap(&fitted.moments.scatter()).ok();
+    figures.quadric_gap = quality::moments_gap(&fitted.moments);
     let start = Start {
         norm: screening.norm,
         ls: fitted.ls,

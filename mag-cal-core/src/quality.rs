@@ -390,6 +390,13 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
     Ok(larger(l1, floor) / larger(l0, floor))
 }
 
+/// [`quadric_gap`] of the moments' scatter, `None` when it cannot be
+/// computed. Out of line: the scatter takes stack only while it is used.
+#[inline(never)]
+pub(crate) fn moments_gap<T: Real>(m: &Moments<T>) -> Option<T> {
+    quadric_gap(&m.scatter()).ok()
+}
+
 /// Number of eigenvalues below `x` of the symmetric tridiagonal matrix with
 /// diagonal `d` and off-diagonal `e` (Sturm sequence: the negative pivots
 /// of the LDL^T factorisation of the matrix minus `x`).
@@ -556,7 +563,9 @@ fn lack_of_fit<T: Real>(cells: &Cells<T>, sigma: T) -> (T, bool) {
 /// (all when `None`) are the rows used, and give the RMS of `r`, the
 /// lack-of-fit figure, and the coverage and Gram condition of their
 /// directions `h = u / |u|`, or of `directions` when given (then the pass
-/// need not sum the directions).
+/// need not sum the directions). Out of line: its histogram and cells
+/// take stack only while it runs.
+#[inline(never)]
 pub(crate) fn final_pass<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,

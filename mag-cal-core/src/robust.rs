@@ -49,10 +49,41 @@ pub(crate) struct RobustLs<T: Real> {
     pub passes: u32,
 }
 
+/// The LS fit of `moments`. Out of line: the 10x10 scatter takes stack
+/// only while it is solved.
+#[inline(never)]
+fn fit_moments<T: Real>(moments: &Moments<T>, solve: Solve<T>) -> Result<Ellipsoid<T>, Error> {
+    fit_with(&moments.scatter(), solve)
+}
+
+/// One weighted LS refit pass: the moments of the rows whose algebraic
+/// residual under `ls` is within [`OUTLIER_CUT`]` sigma`, and the robust
+/// sigma of the residuals under `ls` (for the next pass). Out of line: its
+/// histogram takes stack only during the pass.
+#[inline(never)]
+fn weighted_moments<T: Real, S: Sample>(
+    samples: &[S],
+    screening: &Screening<T>,
+    gate: &Gate<T>,
+    ls: &Ellipsoid<T>,
+    sigma: T,
+) -> (Moments<T>, Option<T>) {
+    let norm = &screening.norm;
+    let mut hist = LogHistogram::new();
+    let cut = Cut {
+        map: Projector::new(norm, &ls.centre, &ls.w),
+        limit: sigma * T::lit(OUTLIER_CUT),
+    };
+    let (m, _) = Moments::accumulate_with(samples, norm, gate, Some(&cut), Some(&mut hist));
+    (m, robust_sigma(&hist))
+}
+
 /// The moments of the crude start: the rows `gate` passes (the rules and
 /// the screening ball of `screening`) within the band around the crude
 /// sphere that holds [`crate::screen::CRUDE_SHARE`] of them, in the
-/// screening's normalised coordinates.
+/// screening's normalised coordinates. Out of line (stack, as
+/// [`robust_ls`]).
+#[inline(never)]
 pub(crate) fn crude_moments<T: Real, S: Sample>(
     samples: &[S],
     screening: &Screening<T>,
@@ -70,7 +101,10 @@ pub(crate) fn crude_moments<T: Real, S: Sample>(
 }
 
 /// The robust LS fit from the crude start's moments `crude` (one pass
-/// already made), over the rows `gate` passes.
+/// already made), over the rows `gate` passes. Out of line: its
+/// histogram and scatter take stack only while it runs, not during the
+/// method's passes.
+#[inline(never)]
 pub(crate) fn robust_ls<T: Real, S: Sample>(
     samples: &[S],
     screening: &Screening<T>,
@@ -78,27 +112,21 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     crude: &Moments<T>,
     solve: Solve<T>,
 ) -> Result<RobustLs<T>, Error> {
-    let norm = &screening.norm;
     let mut moments = *crude;
     let mut passes = 1;
-    let mut ls = fit_with(&moments.scatter(), solve)?;
+    let mut ls = fit_moments(&moments, solve)?;
     let mut sigma = screening.sphere_error;
     let mut last_kept = None;
     for _ in 0..REFITS {
-        let mut hist = LogHistogram::new();
-        let cut = Cut {
-            map: Projector::new(norm, &ls.centre, &ls.w),
-            limit: sigma * T::lit(OUTLIER_CUT),
-        };
-        let (m, _) = Moments::accumulate_with(samples, norm, gate, Some(&cut), Some(&mut hist));
+        let (m, measured) = weighted_moments(samples, screening, gate, &ls, sigma);
         passes += 1;
-        let Ok(next) = fit_with(&m.scatter(), solve) else {
+        let Ok(next) = fit_moments(&m, solve) else {
             // The kept rows no longer determine an ellipsoid: keep the
             // last fit (its residuals are those just measured).
-            sigma = robust_sigma(&hist).unwrap_or(sigma);
+            sigma = measured.unwrap_or(sigma);
             break;
         };
-        sigma = robust_sigma(&hist).unwrap_or(sigma);
+        sigma = measured.unwrap_or(sigma);
         let kept = m.count();
         moments = m;
         ls = next;

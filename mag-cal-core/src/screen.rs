@@ -71,7 +71,9 @@ pub(crate) struct Screening<T: Real> {
     pub passes: u32,
 }
 
-/// Screens the rows the scan's rules keep.
+/// Screens the rows the scan's rules keep. Out of line: its histograms
+/// take stack only while it runs.
+#[inline(never)]
 pub(crate) fn screen<T: Real, S: Sample>(
     samples: &[S],
     scan: &Scan<T>,
