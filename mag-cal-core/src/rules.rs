@@ -173,14 +173,8 @@ pub(crate) fn check<T: Real, S: Sample>(
     rules: &Rules<T>,
 ) -> Result<[T; 3], Rule> {
     if rules.glitches {
-        if sample.is_zero() {
-            return Err(Rule::Zero);
-        }
-        if sample.on_rails() {
-            return Err(Rule::Rails);
-        }
-        if prev.is_some_and(|p| p == sample) {
-            return Err(Rule::Repeated);
+        if let Some(rule) = glitch(sample, prev) {
+            return Err(rule);
         }
     }
     let v = sample.xyz::<T>();
@@ -236,6 +230,11 @@ impl<T: Real> Gate<T> {
         rules: Rules::PLAIN,
         screen: None,
     };
+
+    /// Whether the gate passes every finite, representable row.
+    pub(crate) fn is_plain(&self) -> bool {
+        !self.rules.glitches && !self.rules.clipping && self.screen.is_none()
+    }
 
     /// The components of a row the gate passes.
     #[inline(always)]
@@ -303,13 +302,6 @@ impl<T: Real> Filter<T> for Gate<T> {
         prev: Option<&'a S>,
     ) -> impl Iterator<Item = [T; 3]> + 'a {
         Gate::rows(self, block, prev)
-    }
-}
-
-impl<T: Real> Gate<T> {
-    /// Whether the gate passes every finite, representable row.
-    pub(crate) fn is_plain(&self) -> bool {
-        !self.rules.glitches && self.screen.is_none()
     }
 }
 
@@ -445,8 +437,8 @@ pub(crate) fn pieces<S>(samples: &[S], size: usize) -> impl Iterator<Item = (Opt
     })
 }
 
-/// The glitch rule that drops a row of an always-finite type (the rules
-/// other than the clip levels, on the raw row).
+/// The glitch rule (zero, rails, repeated) that drops a row, on the raw
+/// row: integer compares for integer samples, before any conversion.
 #[inline(always)]
 fn glitch<S: Sample>(sample: &S, prev: Option<&S>) -> Option<Rule> {
     if sample.is_zero() {
