@@ -126,42 +126,42 @@ impl<T: Real> Stats<T> {
         centre: &Vector3<T>,
         w: &Matrix3<T>,
     ) -> Result<Self, Error> {
-        let mut hist = LogHistogram::new();
-        let pass = Pass {
-            gate: &Gate::PLAIN,
-            limit: None,
-        };
-        Self::accumulate_with(samples, norm, centre, w, &pass, &mut hist).map(|(s, _)| s)
+        Self::from_pass(samples, norm, centre, w, None)
     }
 
     /// [`Stats::accumulate`] over the rows the pass's gate passes whose
     /// radial residual `r = |u| - 1` under the start is within the pass's
-    /// limit (0/1 weights: a weighted ADC2 pass). Counts `|r|` of every
-    /// row the gate passes in `hist`, and returns the largest `|r|` and the
-    /// rows the gate passed.
+    /// limit (0/1 weights: a weighted ADC2 pass), measuring `|r|` of every
+    /// row the gate passes into `residuals`.
     pub(crate) fn accumulate_with<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         centre: &Vector3<T>,
         w: &Matrix3<T>,
         pass: &Pass<'_, T>,
-        hist: &mut LogHistogram,
-    ) -> Result<(Self, Residuals<T>), Error> {
+        residuals: &mut Residuals<T>,
+    ) -> Result<Self, Error> {
+        Self::from_pass(samples, norm, centre, w, Some((pass, residuals)))
+    }
+
+    /// The pass: plain (`None`), or gated, weighted and measured.
+    fn from_pass<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        weighted: Option<(&Pass<'_, T>, &mut Residuals<T>)>,
+    ) -> Result<Self, Error> {
         let mut total = [T::zero(); SUMS];
-        let mut res = Residuals {
-            passed: 0,
-            max: T::zero(),
-        };
         let map = Projector::new(norm, centre, w);
-        let count = sums(samples, &map, pass, hist, &mut res, &mut total);
+        let count = sums(samples, &map, weighted, &mut total);
         if count < crate::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
                 required: crate::normalize::MIN_SAMPLES,
             });
         }
-        let stats = Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)?;
-        Ok((stats, res))
+        Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)
     }
 
     /// The statistics from the sums of the pass, or `None` when `W0` is
@@ -233,13 +233,24 @@ pub(crate) struct Pass<'a, T: Real> {
     pub limit: Option<T>,
 }
 
-/// What a pass saw of the radial residuals of the rows its gate passed.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// What a weighted pass measures of the radial residuals `||u| - 1|` of
+/// the rows its gate passes (before its limit).
+#[derive(Clone, Debug)]
 pub(crate) struct Residuals<T: Real> {
-    /// Rows the gate passed.
-    pub passed: usize,
-    /// The largest `||u| - 1|`.
+    /// Their histogram.
+    pub hist: LogHistogram,
+    /// The largest.
     pub max: T,
+}
+
+impl<T: Real> Residuals<T> {
+    /// Nothing measured yet.
+    pub(crate) fn new() -> Self {
+        Self {
+            hist: LogHistogram::new(),
+            max: T::zero(),
+        }
+    }
 }
 
 /// Adds the [`SUMS`] sums of the samples to `total` (zeros on entry), in
@@ -250,24 +261,20 @@ pub(crate) struct Residuals<T: Real> {
 fn sums<T: Real, S: Sample>(
     samples: &[S],
     map: &Projector<T>,
-    pass: &Pass<'_, T>,
-    hist: &mut LogHistogram,
-    res: &mut Residuals<T>,
+    mut weighted: Option<(&Pass<'_, T>, &mut Residuals<T>)>,
     total: &mut [T; SUMS],
 ) -> usize {
     let mut count = 0usize;
     let mut buf = [[T::zero(); 4]; CHUNK];
     // The plain pass (every finite row, weight 1) needs neither the rules
     // nor the residuals: its loop is the cheaper one.
-    let plain = pass.gate.is_plain() && pass.limit.is_none();
     for (block_prev, block) in pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);
-            count += if plain {
-                plain_directions(chunk, map, &mut buf)
-            } else {
-                directions(chunk, prev, map, pass, hist, res, &mut buf)
+            count += match weighted.as_mut() {
+                None => plain_directions(chunk, map, &mut buf),
+                Some((pass, res)) => directions(chunk, prev, map, pass, res, &mut buf),
             };
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
@@ -338,15 +345,14 @@ fn plain_direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option
 /// `[u, 1/|u|]` of each sample of `chunk` into `out` (zeros for a sample
 /// without a direction: dropped by the gate, at the fitted centre, or
 /// beyond the pass's limit), the residuals of the rows the gate passes
-/// counted in `hist` and `res`, and the count of the samples with a
-/// direction. `prev` is the row before the chunk.
+/// measured into `res`, and the count of the samples with a direction.
+/// `prev` is the row before the chunk.
 #[inline(never)]
 fn directions<T: Real, S: Sample>(
     chunk: &[S],
     prev: Option<&S>,
     map: &Projector<T>,
     pass: &Pass<'_, T>,
-    hist: &mut LogHistogram,
     res: &mut Residuals<T>,
     out: &mut [[T; 4]; CHUNK],
 ) -> usize {
@@ -354,7 +360,7 @@ fn directions<T: Real, S: Sample>(
     let mut last = prev;
     let limit = pass.limit.unwrap_or(T::MAX);
     let mut max = res.max;
-    let mut passed = 0;
+    let hist = &mut res.hist;
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
         let row = pass.gate.pass(sample, last);
         last = Some(sample);
@@ -362,7 +368,6 @@ fn directions<T: Real, S: Sample>(
         let Some(y) = row else {
             continue;
         };
-        passed += 1;
         let [ux, uy, uz] = map.project(y);
         let q = ux * ux + uy * uy + uz * uz;
         if !(q >= T::MIN_POSITIVE) {
@@ -381,7 +386,6 @@ fn directions<T: Real, S: Sample>(
         }
     }
     res.max = max;
-    res.passed += passed;
     count
 }
 

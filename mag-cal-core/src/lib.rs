@@ -326,7 +326,6 @@ struct Start<T: Real> {
     ls: ellipsoid::Ellipsoid<T>,
     weights: methods::Weights<T>,
     robust_passes: u32,
-    screen: Option<rules::Ball<T>>,
 }
 
 /// The plain pipeline: every row the scan kept, weight 1. Returns the fit
@@ -351,7 +350,7 @@ fn plain_path<T: Real, S: Sample>(
             screen: None,
         }
     };
-    let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None).0;
+    let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
         // Gross outliers: not worth a plain fit (the caller screens).
         return Err(Error::OutOfRange);
@@ -368,7 +367,6 @@ fn plain_path<T: Real, S: Sample>(
         ls,
         weights: methods::Weights { gate, sigma: None },
         robust_passes: 0,
-        screen: None,
     };
     let done = finish(samples, config, &start, step, figures)?;
     let fit = done.fit;
@@ -376,16 +374,8 @@ fn plain_path<T: Real, S: Sample>(
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
     let clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
         && clean_limit(done.final_max, sigma)
-        && !figures_misfit(&fit, done.misfit_significant, config);
+        && !done.misfit;
     Ok((fit, clean))
-}
-
-/// Whether the fit's lack of fit is beyond the limit (for the methods
-/// judged on it).
-fn figures_misfit<T: Real>(fit: &Fit<T>, significant: bool, config: &Config) -> bool {
-    config.method.fits_radial_residual()
-        && significant
-        && fit.report.quality.lack_of_fit > T::from_single(config.thresholds.refuse_lack_of_fit)
 }
 
 /// The robust pipeline (section 14 of the design document): screening, the
@@ -428,7 +418,6 @@ fn robust_path<T: Real, S: Sample>(
             sigma: Some(fitted.sigma),
         },
         robust_passes: screening.passes + fitted.passes,
-        screen: Some(screening.ball),
     };
     finish(samples, config, &start, step, figures).map(|done| done.fit)
 }
@@ -441,7 +430,8 @@ struct Finished<T: Real> {
     method_max: Option<(T, T)>,
     /// The final pass's largest residual.
     final_max: T,
-    misfit_significant: bool,
+    /// The lack of fit is beyond its limit (`Figures::misfit`).
+    misfit: bool,
 }
 
 /// The method from the start, the final pass, and the judging.
@@ -527,7 +517,7 @@ fn finish<T: Real, S: Sample>(
                 .rules
                 .clip
                 .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
-            screen: start.screen.as_ref().map(to_sensor),
+            screen: start.weights.gate.screen.as_ref().map(to_sensor),
             residual_limit: limit,
         },
     };
@@ -538,7 +528,7 @@ fn finish<T: Real, S: Sample>(
         },
         method_max: est.max_residual.zip(est.sigma),
         final_max: last.max_residual,
-        misfit_significant: last.misfit_significant,
+        misfit: figures.misfit(&config.thresholds),
     })
 }
 

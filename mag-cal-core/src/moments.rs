@@ -107,27 +107,23 @@ impl<T: Real> Moments<T> {
     /// [`Moments::accumulate`] over the rows `gate` passes and, with a
     /// `cut`, only those whose algebraic residual under the cut's fit is
     /// within its limit (a weighted LS refit with 0/1 weights). `hist`, when
-    /// given, counts the residuals of every row the gate passes. Returns
-    /// the moments and the rows the gate passed; the count of the rows kept
-    /// is the moment `sums[0]`.
+    /// given, counts the residuals of every row the gate passes. The count
+    /// of the rows kept is the moment `sums[0]` ([`Moments::count`]).
     pub(crate) fn accumulate_with<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         gate: &Gate<T>,
         cut: Option<&Cut<T>>,
         mut hist: Option<&mut LogHistogram>,
-    ) -> (Self, usize) {
+    ) -> Self {
         if gate.is_plain() && cut.is_none() {
-            let m = Self::accumulate(samples, norm);
-            return (m, m.count());
+            return Self::accumulate(samples, norm);
         }
         let mut sums = [T::zero(); COUNT];
-        let mut passed = 0;
         let (low, high) = sums.split_at_mut(LOW);
         for (prev, block) in pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
-            let (a, n) = sum_low(block, prev, norm, gate, cut, hist.as_deref_mut(), &mut mask);
-            passed += n;
+            let a = sum_low(block, prev, norm, gate, cut, hist.as_deref_mut(), &mut mask);
             for (t, v) in low.iter_mut().zip(a) {
                 *t += v;
             }
@@ -135,7 +131,7 @@ impl<T: Real> Moments<T> {
                 *t += v;
             }
         }
-        (Self { sums }, passed)
+        Self { sums }
     }
 
     /// Number of samples summed (the moment of degree 0).
@@ -240,7 +236,7 @@ pub(crate) struct Cut<T: Real> {
 
 /// The count and the sums of the monomials of degrees 1-3 over the rows of
 /// `block` that the gate passes and the cut keeps, in [`EXPONENTS`] order;
-/// marks the kept rows in `mask` and returns the count the gate passed.
+/// marks the kept rows in `mask`.
 #[inline(never)]
 fn sum_low<T: Real, S: Sample>(
     block: &[S],
@@ -250,13 +246,12 @@ fn sum_low<T: Real, S: Sample>(
     cut: Option<&Cut<T>>,
     mut hist: Option<&mut LogHistogram>,
     mask: &mut [u32; MASK_WORDS],
-) -> ([T; LOW], usize) {
+) -> [T; LOW] {
     let mut a = [T::zero(); LOW];
     let (c, is) = (&norm.centre, norm.inv_scale);
     let half = T::lit(0.5);
-    // Integer counts leave the floating-point registers to the sums.
+    // An integer count leaves the floating-point registers to the sums.
     let mut count = 0;
-    let mut passed = 0;
     let mut last = prev;
     for (i, s) in block.iter().enumerate() {
         let row = gate.pass(s, last);
@@ -264,7 +259,6 @@ fn sum_low<T: Real, S: Sample>(
         let Some(y) = row else {
             continue;
         };
-        passed += 1;
         if let Some(cut) = cut {
             let [ux, uy, uz] = cut.map.project(y);
             let e = (ux * ux + uy * uy + uz * uz - T::one()) * half;
@@ -287,7 +281,7 @@ fn sum_low<T: Real, S: Sample>(
         );
     }
     a[0] = T::from_count(count);
-    (a, passed)
+    a
 }
 
 /// The sums of the monomials of degree 4 over the rows of `block` marked

@@ -236,6 +236,16 @@ pub(crate) struct Figures<T: Real> {
 }
 
 impl<T: Real> Figures<T> {
+    /// Whether the lack of fit is judged, significant against the noise,
+    /// and beyond its limit.
+    pub(crate) fn misfit(&self, th: &Thresholds) -> bool {
+        self.judge_lack_of_fit
+            && self.misfit_significant
+            && self
+                .lack_of_fit
+                .is_some_and(|l| !(l <= T::from_single(th.refuse_lack_of_fit)))
+    }
+
     pub(crate) fn outlier_share(&self) -> Option<T> {
         let used = self.used?;
         if self.valid == 0 {
@@ -278,10 +288,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
                 });
             }
         }
-        let misfit = f.judge_lack_of_fit
-            && f.misfit_significant
-            && above(f.lack_of_fit, th.refuse_lack_of_fit);
-        if let Some(l) = f.lack_of_fit.filter(|_| misfit) {
+        if let Some(l) = f.lack_of_fit.filter(|_| f.misfit(th)) {
             return Err(Error::SystematicMisfit {
                 lack_of_fit: fig(l),
                 limit: Figure::new(th.refuse_lack_of_fit),

@@ -74,7 +74,7 @@ fn weighted_moments<T: Real, S: Sample>(
         map: Projector::new(norm, &ls.centre, &ls.w),
         limit: sigma * T::lit(OUTLIER_CUT),
     };
-    let (m, _) = Moments::accumulate_with(samples, norm, gate, Some(&cut), Some(&mut hist));
+    let m = Moments::accumulate_with(samples, norm, gate, Some(&cut), Some(&mut hist));
     (m, robust_sigma(&hist))
 }
 
@@ -97,7 +97,7 @@ pub(crate) fn crude_moments<T: Real, S: Sample>(
         map: Projector::new(norm, &Vector3::zeros(), &Matrix3::identity()),
         limit: t + t * t * T::lit(0.5),
     };
-    Moments::accumulate_with(samples, norm, gate, Some(&crude), None).0
+    Moments::accumulate_with(samples, norm, gate, Some(&crude), None)
 }
 
 /// The robust LS fit from the crude start's moments `crude` (one pass

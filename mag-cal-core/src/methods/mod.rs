@@ -3,7 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::artificial::{Pass, Stats};
+use crate::artificial::{Pass, Residuals, Stats};
 use crate::ellipsoid::Ellipsoid;
 use crate::histogram::LogHistogram;
 use crate::linalg::larger;
@@ -137,7 +137,7 @@ pub const OUTLIER_CUT: f64 = 3.5;
 /// The artificial-data pass under the start `(centre, w)` with the 0/1
 /// weights: the statistics, the robust sigma of the residuals of the rows
 /// the gate passed (`None` for the plain pass, which does not measure
-/// them), and the largest residual.
+/// them), and the largest residual (0 for the plain pass).
 pub(crate) fn weighted_stats<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,
@@ -145,13 +145,31 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
     w: &Matrix3<T>,
     weights: &Weights<T>,
 ) -> Result<(Stats<T>, Option<T>, T), Error> {
-    let mut hist = LogHistogram::new();
+    if weights.gate.is_plain() && weights.sigma.is_none() {
+        let stats = Stats::accumulate(samples, norm, centre, w)?;
+        return Ok((stats, None, T::zero()));
+    }
+    measured_stats(samples, norm, centre, w, weights)
+}
+
+/// [`weighted_stats`] of a gated or weighted pass. Out of line: the
+/// residuals' histogram takes stack only while it runs, not on the plain
+/// path.
+#[inline(never)]
+fn measured_stats<T: Real, S: Sample>(
+    samples: &[S],
+    norm: &Normalization<T>,
+    centre: &Vector3<T>,
+    w: &Matrix3<T>,
+    weights: &Weights<T>,
+) -> Result<(Stats<T>, Option<T>, T), Error> {
+    let mut res = Residuals::new();
     let pass = Pass {
         gate: &weights.gate,
         limit: weights.limit(),
     };
-    let (stats, res) = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut hist)?;
-    Ok((stats, robust_sigma(&hist), res.max))
+    let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
+    Ok((stats, robust_sigma(&res.hist), res.max))
 }
 
 /// The robust standard deviation `1.4826 median|r|` of the residuals
