@@ -114,16 +114,38 @@ impl<T: Real> Moments<T> {
         norm: &Normalization<T>,
         gate: &Gate<T>,
         cut: Option<&Cut<T>>,
-        mut hist: Option<&mut LogHistogram>,
+        hist: Option<&mut LogHistogram>,
     ) -> Self {
-        if gate.is_plain() && cut.is_none() {
+        Self::accumulate_every(samples, norm, gate, cut, hist, 1)
+    }
+
+    /// [`Moments::accumulate_with`] over every `stride`-th row of each
+    /// block of [`BLOCK`] rows (a fixed subsample; the repetition rule still
+    /// reads the row before each).
+    pub(crate) fn accumulate_every<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        gate: &Gate<T>,
+        cut: Option<&Cut<T>>,
+        mut hist: Option<&mut LogHistogram>,
+        stride: usize,
+    ) -> Self {
+        if gate.is_plain() && cut.is_none() && stride <= 1 {
             return Self::accumulate(samples, norm);
         }
         let mut sums = [T::zero(); COUNT];
         let (low, high) = sums.split_at_mut(LOW);
         for (prev, block) in pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
-            let kept = select(block, prev, gate, cut, hist.as_deref_mut(), &mut mask);
+            let kept = select(
+                block,
+                prev,
+                gate,
+                cut,
+                hist.as_deref_mut(),
+                &mut mask,
+                stride,
+            );
             let mut a = sum_low(block, norm, &mask);
             a[0] = T::from_count(kept);
             for (t, v) in low.iter_mut().zip(a) {
@@ -236,8 +258,8 @@ pub(crate) struct Cut<T: Real> {
 // so that each loop gets the floating-point registers to itself: inlined,
 // the normalisation constants of one loop spill during the other.
 
-/// Marks in `mask` the rows of `block` that the gate passes and the cut
-/// keeps, and returns their count; `hist`, when given, counts the cut's
+/// Marks in `mask` the rows of `block` (every `stride`-th, from the first)
+/// that the gate passes and the cut keeps, and returns their count; `hist`, when given, counts the cut's
 /// residual of every row the gate passes. A loop of its own: with the
 /// gate's and the cut's constants beside the 19 sums, one loop spilled
 /// (about 230 instructions a sample on a Cortex-M4F for this and
@@ -250,14 +272,16 @@ fn select<T: Real, S: Sample>(
     cut: Option<&Cut<T>>,
     mut hist: Option<&mut LogHistogram>,
     mask: &mut [u32; MASK_WORDS],
+    stride: usize,
 ) -> usize {
     let half = T::lit(0.5);
     let mut count = 0;
-    let mut last = prev;
-    for (i, s) in block.iter().enumerate() {
-        let row = gate.pass(s, last);
-        last = Some(s);
-        let Some(y) = row else {
+    for (i, s) in block.iter().enumerate().step_by(stride.max(1)) {
+        let last = match i.checked_sub(1) {
+            Some(j) => block.get(j),
+            None => prev,
+        };
+        let Some(y) = gate.pass(s, last) else {
             continue;
         };
         if let Some(cut) = cut {

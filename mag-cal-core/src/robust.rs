@@ -34,6 +34,18 @@ use crate::{Error, Real};
 /// Cap on the weighted LS refits after the crude start.
 pub const REFITS: u32 = 8;
 
+/// The crude start and the refits before the last run on a fixed
+/// subsample of about this many rows (every `k`-th row, `k` at least 1);
+/// the last refit runs on every row. Which rows are outliers is settled as
+/// well on a few hundred rows as on all of them, at a fraction of the
+/// passes' cost.
+pub const SUBSAMPLE_ROWS: usize = 256;
+
+/// The subsample stride for `rows` rows.
+fn stride(rows: usize) -> usize {
+    (rows / SUBSAMPLE_ROWS).max(1)
+}
+
 /// The robust LS fit and what the method's passes need from it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RobustLs<T: Real> {
@@ -67,6 +79,7 @@ fn weighted_moments<T: Real, S: Sample>(
     gate: &Gate<T>,
     ls: &Ellipsoid<T>,
     sigma: T,
+    stride: usize,
 ) -> (Moments<T>, Option<T>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
@@ -74,7 +87,7 @@ fn weighted_moments<T: Real, S: Sample>(
         map: Projector::new(norm, &ls.centre, &ls.w),
         limit: sigma * T::lit(OUTLIER_CUT),
     };
-    let m = Moments::accumulate_with(samples, norm, gate, Some(&cut), Some(&mut hist));
+    let m = Moments::accumulate_every(samples, norm, gate, Some(&cut), Some(&mut hist), stride);
     (m, robust_sigma(&hist))
 }
 
@@ -97,7 +110,8 @@ pub(crate) fn crude_moments<T: Real, S: Sample>(
         map: Projector::new(norm, &Vector3::zeros(), &Matrix3::identity()),
         limit: t + t * t * T::lit(0.5),
     };
-    Moments::accumulate_with(samples, norm, gate, Some(&crude), None)
+    let every = stride(screening.valid);
+    Moments::accumulate_every(samples, norm, gate, Some(&crude), None, every)
 }
 
 /// The robust LS fit from the crude start's moments `crude` (one pass
@@ -116,24 +130,36 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     let mut passes = 1;
     let mut ls = fit_moments(&moments, solve)?;
     let mut sigma = screening.sphere_error;
-    let mut last_kept = None;
-    for _ in 0..REFITS {
-        let (m, measured) = weighted_moments(samples, screening, gate, &ls, sigma);
-        passes += 1;
-        let Ok(next) = fit_moments(&m, solve) else {
-            // The kept rows no longer determine an ellipsoid: keep the
-            // last fit (its residuals are those just measured).
+    let every = stride(screening.valid);
+    // On a subsample the refits run until its kept count repeats, and one
+    // more on every row settles the fit; without one, all run on every row.
+    let (sub_refits, full_refits) = if every > 1 {
+        (REFITS - 1, 1)
+    } else {
+        (0, REFITS)
+    };
+    for (rounds, rows) in [(sub_refits, every), (full_refits, 1)] {
+        let mut last_kept = None;
+        for _ in 0..rounds {
+            let (m, measured) = weighted_moments(samples, screening, gate, &ls, sigma, rows);
+            passes += 1;
             sigma = measured.unwrap_or(sigma);
-            break;
-        };
-        sigma = measured.unwrap_or(sigma);
-        let kept = m.count();
-        moments = m;
-        ls = next;
-        if last_kept == Some(kept) {
-            break;
+            let Ok(next) = fit_moments(&m, solve) else {
+                // The kept rows no longer determine an ellipsoid: keep the
+                // last fit (its residuals are those just measured).
+                break;
+            };
+            let kept = m.count();
+            moments = m;
+            ls = next;
+            // The subsample's count need only settle (the full refit
+            // follows); on every row it must repeat.
+            let settled = |before: usize| kept.abs_diff(before) <= if rows > 1 { 1 } else { 0 };
+            if last_kept.is_some_and(settled) {
+                break;
+            }
+            last_kept = Some(kept);
         }
-        last_kept = Some(kept);
     }
     Ok(RobustLs {
         ls,
