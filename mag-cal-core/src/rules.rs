@@ -248,6 +248,26 @@ impl<T: Real> Gate<T> {
 
     /// The rows of `block` the gate passes; `prev` is the row before the
     /// block in the whole slice.
+    /// [`Gate::rows`] over every `stride`-th row of `block`, from the
+    /// first (a fixed subsample; the repetition rule reads the row before
+    /// each).
+    #[inline(always)]
+    pub(crate) fn rows_every<'a, S: Sample>(
+        &'a self,
+        block: &'a [S],
+        prev: Option<&'a S>,
+        stride: usize,
+    ) -> impl Iterator<Item = [T; 3]> + 'a {
+        let rows = block.iter().enumerate().step_by(stride.max(1));
+        rows.filter_map(move |(i, s)| {
+            let last = match i.checked_sub(1) {
+                Some(j) => block.get(j),
+                None => prev,
+            };
+            self.pass(s, last)
+        })
+    }
+
     #[inline(always)]
     pub(crate) fn rows<'a, S: Sample>(
         &'a self,

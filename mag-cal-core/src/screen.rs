@@ -42,6 +42,19 @@ pub const RESOLVED_BINS: usize = 16;
 /// Cap on the nested histogram passes.
 pub const MAX_LEVELS: u32 = 12;
 
+/// The median distance, the shell band and the crude start, and the
+/// robust LS refits before the last ([`crate::robust`]), run on a fixed
+/// subsample of about this many rows (every `k`-th row, `k` at least 1).
+/// A quantile or the set of outliers is settled as well on a few hundred
+/// rows as on all of them, at a fraction of the passes' cost; the clip
+/// levels, the median centre and the last refit see every row.
+pub const SUBSAMPLE_ROWS: usize = 256;
+
+/// The subsample stride for `rows` rows ([`SUBSAMPLE_ROWS`]).
+pub(crate) fn stride(rows: usize) -> usize {
+    (rows / SUBSAMPLE_ROWS).max(1)
+}
+
 /// `1 / Phi^-1(3/4)`: a standard deviation from the median absolute value
 /// of a normal variable.
 pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
@@ -59,8 +72,6 @@ pub(crate) struct Screening<T: Real> {
     pub ball: Ball<T>,
     /// The normalisation of the robust path: median centre, scale `m`.
     pub norm: Normalization<T>,
-    /// Rows the rules kept that lie outside the ball.
-    pub screened: usize,
     /// Half-width of the band `| |y - c| - m | <= band` that holds
     /// [`CRUDE_SHARE`] of the screened samples, sensor units.
     pub band: T,
@@ -89,9 +100,10 @@ pub(crate) fn screen<T: Real, S: Sample>(
     // Median distance, on the scale of the spread (the mean inter-quartile
     // range: a sphere's radius).
     let inv_spread = T::one() / spread;
+    let every = stride(scan.used);
     let mut dist = LogHistogram::new();
     for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-        distances(block, prev, &gate, centre, inv_spread, &mut dist);
+        distances(block, prev, &gate, centre, inv_spread, every, &mut dist);
     }
     passes += 1;
     let m = dist
@@ -117,10 +129,9 @@ pub(crate) fn screen<T: Real, S: Sample>(
     let inv_m = T::one() / m;
     let mut shell = LogHistogram::new();
     for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-        shell_residuals(block, prev, &inside, centre, inv_m, &mut shell);
+        shell_residuals(block, prev, &inside, centre, inv_m, every, &mut shell);
     }
     passes += 1;
-    let kept = shell.total() as usize;
     let band = shell.quantile(T::lit(CRUDE_SHARE)).unwrap_or(T::zero()) * m;
     let sphere_error = shell.quantile(T::lit(0.5)).unwrap_or(T::zero()) * T::lit(MAD_TO_SIGMA);
     let norm = Normalization {
@@ -140,9 +151,6 @@ pub(crate) fn screen<T: Real, S: Sample>(
         valid,
         ball,
         norm,
-        // Halvings in a histogram of more than 65 535 rows can leave its
-        // total a little short: never report a negative count.
-        screened: valid.saturating_sub(kept.min(valid)),
         band,
         sphere_error,
         passes,
@@ -299,7 +307,8 @@ fn fill<T: Real, S: Sample>(
     }
 }
 
-/// Counts `|y - c|^2 / spread^2` of the rows of `block` the gate passes.
+/// Counts `|y - c|^2 / spread^2` of every `stride`-th row of `block`
+/// that the gate passes.
 #[inline(never)]
 fn distances<T: Real, S: Sample>(
     block: &[S],
@@ -307,9 +316,10 @@ fn distances<T: Real, S: Sample>(
     gate: &Gate<T>,
     c: [T; 3],
     inv_spread: T,
+    stride: usize,
     h: &mut LogHistogram,
 ) {
-    for y in gate.rows(block, prev) {
+    for y in gate.rows_every(block, prev, stride) {
         let d = [
             (y[0] - c[0]) * inv_spread,
             (y[1] - c[1]) * inv_spread,
@@ -319,7 +329,8 @@ fn distances<T: Real, S: Sample>(
     }
 }
 
-/// Counts `| |y - c| / m - 1 |` of the rows of `block` the gate passes.
+/// Counts `| |y - c| / m - 1 |` of every `stride`-th row of `block` that
+/// the gate passes.
 #[inline(never)]
 fn shell_residuals<T: Real, S: Sample>(
     block: &[S],
@@ -327,9 +338,10 @@ fn shell_residuals<T: Real, S: Sample>(
     gate: &Gate<T>,
     c: [T; 3],
     inv_m: T,
+    stride: usize,
     h: &mut LogHistogram,
 ) {
-    for y in gate.rows(block, prev) {
+    for y in gate.rows_every(block, prev, stride) {
         let d = [
             (y[0] - c[0]) * inv_m,
             (y[1] - c[1]) * inv_m,
