@@ -87,8 +87,13 @@ fn pair(
     match (a, c) {
         (Ok(a), Ok(c)) => Ok(Some((a.calibration, c.calibration))),
         (Err(a), Err(c)) if core::mem::discriminant(&a) == core::mem::discriminant(&c) => {
+            // `distortion()` draws axis ratios up to 4, a condition of `M`
+            // up to 16: the refusal limit (`REFUSE_DISTORTION`). With noise
+            // an estimate near it may pass it, and then it does in both
+            // frames: the same answer, which is what these tests ask.
+            // (`noise_free_recovery` asserts that no draw is refused.)
             prop_assert!(
-                label.contains("LiGriffiths"),
+                label.contains("LiGriffiths") || a == Error::ExtremeDistortion,
                 "{label}: both refused: {a:?}"
             );
             Ok(None)
