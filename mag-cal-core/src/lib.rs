@@ -79,7 +79,10 @@
 //!    refits LS with 0/1 weights on the residual (at
 //!    [`methods::OUTLIER_CUT`]` = 3.5` robust standard deviations
 //!    `1.4826 median|r|`, from fixed histograms: no sorting, nothing stored
-//!    per sample), then runs the method with the same weights.
+//!    per sample), then runs the method with the same weights. The
+//!    quantiles of the screening and the refits before the last two use a
+//!    fixed subsample of about [`screen::SUBSAMPLE_ROWS`] rows (every
+//!    `k`-th row), so their cost hardly grows with `n`.
 //!
 //! The report says what happened ([`Report::drops`], [`Report::screened`],
 //! [`Report::rejected`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
