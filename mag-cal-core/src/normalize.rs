@@ -52,7 +52,8 @@ pub(crate) struct Scan<T: Real> {
     pub used: usize,
     /// Rows the rules dropped, by rule.
     pub drops: Drops,
-    /// The rules applied (without clip levels: screening finds those).
+    /// The rules the later passes apply: the glitch rules only when they
+    /// dropped a row here, and no clip levels (screening finds those).
     pub rules: Rules<T>,
 }
 
@@ -177,7 +178,12 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         },
         used,
         drops,
-        rules,
+        // Every pass reads the same rows: rules that dropped none here drop
+        // none later, and need not be applied again.
+        rules: Rules {
+            glitches: rules.glitches && drops.glitches() > 0,
+            ..rules
+        },
     })
 }
 

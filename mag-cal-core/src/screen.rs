@@ -188,7 +188,10 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
                 fill_first(block, prev, &gate, (&box_lo, &box_hi), &mut at, &mut h);
             }
-            rules = Rules::with_clip(clip_levels(scan.used, (&box_lo, &box_hi), &at));
+            rules = Rules {
+                glitches: scan.rules.glitches,
+                ..Rules::with_clip(clip_levels(scan.used, (&box_lo, &box_hi), &at))
+            };
         } else {
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
                 fill(block, prev, &gate, &mut h);
