@@ -513,7 +513,9 @@ fn finish<T: Real, S: Sample>(
         quality,
         warnings,
         selection: Selection {
-            glitch_rules: start.weights.gate.rules.glitches,
+            // The rules every row is judged by (a pass skips the glitch
+            // rules when they dropped no row: the rows are the same).
+            glitch_rules: config.robust,
             clip_levels: start
                 .weights
                 .gate
