@@ -478,11 +478,22 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
     let mut prev = None;
     if S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
         // Integer rows: the loop of the scan on clean data, no conversion.
-        for s in samples {
-            if let Some(rule) = glitch(s, prev) {
-                drops.count(rule);
+        // The three tests are combined without branches (`|`, not `||`);
+        // only a flagged row takes the branch that names its rule.
+        let Some((first, rest)) = samples.split_first() else {
+            return drops;
+        };
+        if let Some(rule) = glitch(first, None) {
+            drops.count(rule);
+        }
+        let mut last = first;
+        for s in rest {
+            if s.is_zero() | s.on_rails() | (s == last) {
+                if let Some(rule) = glitch(s, Some(last)) {
+                    drops.count(rule);
+                }
             }
-            prev = Some(s);
+            last = s;
         }
         return drops;
     }
