@@ -258,14 +258,7 @@ impl<T: Real> Gate<T> {
         prev: Option<&'a S>,
         stride: usize,
     ) -> impl Iterator<Item = [T; 3]> + 'a {
-        let rows = block.iter().enumerate().step_by(stride.max(1));
-        rows.filter_map(move |(i, s)| {
-            let last = match i.checked_sub(1) {
-                Some(j) => block.get(j),
-                None => prev,
-            };
-            self.pass(s, last)
-        })
+        every(block, prev, stride).filter_map(move |(_, s, last)| self.pass(s, last))
     }
 
     #[inline(always)]
@@ -447,6 +440,25 @@ impl<T: Real> Selection<T> {
 }
 
 /// The slice in pieces of `size`, each with the row before it.
+/// Every `stride`-th row of `block` from the first, with its index and the
+/// row before it (`prev` for the first row of the block), which the
+/// repetition rule reads.
+#[inline(always)]
+pub(crate) fn every<'a, S>(
+    block: &'a [S],
+    prev: Option<&'a S>,
+    stride: usize,
+) -> impl Iterator<Item = (usize, &'a S, Option<&'a S>)> + 'a {
+    let rows = block.iter().enumerate().step_by(stride.max(1));
+    rows.map(move |(i, s)| {
+        let last = match i.checked_sub(1) {
+            Some(j) => block.get(j),
+            None => prev,
+        };
+        (i, s, last)
+    })
+}
+
 #[inline(always)]
 pub(crate) fn pieces<S>(samples: &[S], size: usize) -> impl Iterator<Item = (Option<&S>, &[S])> {
     let mut prev = None;
