@@ -344,14 +344,11 @@ fn plain_path<T: Real, S: Sample>(
 ) -> Result<(Fit<T>, bool), Error> {
     let norm = scan.norm;
     let mut figures = Figures::new(scan, config, false);
-    // The rows the rules dropped stay out; without drops the plain loops run.
-    let gate = if scan.drops.glitches() == 0 {
-        rules::Gate::PLAIN
-    } else {
-        rules::Gate {
-            rules: scan.rules,
-            screen: None,
-        }
+    // The rows the rules dropped stay out; without drops the scan's rules
+    // are plain, and so are the loops.
+    let gate = rules::Gate {
+        rules: scan.rules,
+        screen: None,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {

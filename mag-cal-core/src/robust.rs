@@ -145,8 +145,8 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             let kept = m.count();
             moments = m;
             ls = next;
-            // The subsample's count need only settle (the full refit
-            // follows); on every row it must repeat.
+            // The subsample's count need only settle (the refits on every
+            // row follow); on every row it must repeat.
             let settled = |before: usize| kept.abs_diff(before) <= if rows > 1 { 1 } else { 0 };
             if last_kept.is_some_and(settled) {
                 break;
