@@ -114,6 +114,10 @@ fn edges<T: Real>(k: usize) -> (T, T) {
 /// Bins per axis of [`AxisHistograms`].
 pub(crate) const AXIS_BINS: usize = 64;
 
+/// Counters per axis of [`AxisHistograms`]: the count below the window,
+/// the [`AXIS_BINS`] bins, the count above it.
+const AXIS_COUNTERS: usize = AXIS_BINS + 2;
+
 /// Three linear histograms over a window `[lo, lo + AXIS_BINS * width)` per
 /// axis, with the counts below and above the window.
 #[derive(Clone, Debug)]
@@ -121,9 +125,8 @@ pub(crate) struct AxisHistograms<T: Real> {
     lo: [T; 3],
     inv_width: [T; 3],
     width: [T; 3],
-    bins: [[u16; AXIS_BINS]; 3],
-    below: [u32; 3],
-    above: [u32; 3],
+    /// Per axis: below the window, the bins, above it.
+    counts: [[u16; AXIS_COUNTERS]; 3],
 }
 
 /// Where a quantile of one axis lies in its window.
@@ -155,69 +158,67 @@ impl<T: Real> AxisHistograms<T> {
             lo,
             inv_width: [inv(width[0]), inv(width[1]), inv(width[2])],
             width,
-            bins: [[0; AXIS_BINS]; 3],
-            below: [0; 3],
-            above: [0; 3],
+            counts: [[0; AXIS_COUNTERS]; 3],
         }
     }
 
     /// Counts one point.
     #[inline(always)]
     pub(crate) fn add(&mut self, y: [T; 3]) {
-        let mut full = false;
-        let axes = y
-            .iter()
-            .zip(&self.lo)
-            .zip(&self.inv_width)
-            .zip(self.bins.iter_mut())
-            .zip(self.below.iter_mut().zip(self.above.iter_mut()));
-        for ((((&v, &lo), &iw), bins), (below, above)) in axes {
-            let t = (v - lo) * iw;
-            if !(t >= T::zero()) {
-                *below += 1;
-            } else if !(t < T::from_count(AXIS_BINS)) {
-                *above += 1;
-            } else if let Some(c) = bins.get_mut(t.to_single() as usize) {
-                // 0 <= t < AXIS_BINS: the truncation is in range.
-                *c += 1;
-                full |= *c == u16::MAX;
-            }
-        }
+        // One axis at a time, written out: a loop over the axes stays a
+        // loop at opt-level "s", twice the instructions a sample.
+        let full = self.add_axis(0, y[0]) | self.add_axis(1, y[1]) | self.add_axis(2, y[2]);
         if full {
             self.halve();
         }
     }
 
+    /// Counts `v` on axis `a`; true when its counter is full.
+    #[inline(always)]
+    fn add_axis(&mut self, a: usize, v: T) -> bool {
+        let (Some(&lo), Some(&iw), Some(counts)) = (
+            self.lo.get(a),
+            self.inv_width.get(a),
+            self.counts.get_mut(a),
+        ) else {
+            return false;
+        };
+        let t = (v - lo) * iw;
+        // Counter 0 below the window (and NaN), 1..=AXIS_BINS the bins,
+        // AXIS_BINS + 1 above it (the cast saturates).
+        let k = if t >= T::zero() {
+            (t.to_single() as u32).min(AXIS_BINS as u32) as usize + 1
+        } else {
+            0
+        };
+        match counts.get_mut(k) {
+            Some(c) => {
+                *c += 1;
+                *c == u16::MAX
+            }
+            None => false,
+        }
+    }
+
     #[inline(never)]
     fn halve(&mut self) {
-        let axes = self
-            .bins
-            .iter_mut()
-            .zip(self.below.iter_mut().zip(self.above.iter_mut()));
-        for (bins, (below, above)) in axes {
-            for c in bins.iter_mut() {
-                *c /= 2;
-            }
-            *below /= 2;
-            *above /= 2;
+        for c in self.counts.iter_mut().flatten() {
+            *c /= 2;
         }
     }
 
     /// The value of axis `a` below which the share `p` of the counts lie.
     pub(crate) fn quantile(&self, a: usize, p: T) -> Place<T> {
-        let (Some(bins), Some(&below), Some(&lo), Some(&w)) = (
-            self.bins.get(a),
-            self.below.get(a),
-            self.lo.get(a),
-            self.width.get(a),
-        ) else {
+        let (Some(counts), Some(&lo), Some(&w)) =
+            (self.counts.get(a), self.lo.get(a), self.width.get(a))
+        else {
             return Place::Outside;
         };
-        let total: u32 = below
-            + self.above.get(a).copied().unwrap_or(0)
-            + bins.iter().map(|&c| u32::from(c)).sum::<u32>();
+        let below = counts.first().copied().unwrap_or(0);
+        let bins = counts.get(1..=AXIS_BINS).unwrap_or(&[]);
+        let total: u32 = counts.iter().map(|&c| u32::from(c)).sum();
         let target = p * T::from_count(total as usize);
-        let mut acc = T::from_count(below as usize);
+        let mut acc = T::from_count(usize::from(below));
         if !(acc < target) && below > 0 {
             return Place::Outside;
         }
@@ -251,7 +252,7 @@ impl<T: Real> AxisHistograms<T> {
     /// halving), as axis 0 holds them.
     #[cfg(test)]
     pub(crate) fn total(&self) -> u32 {
-        self.below[0] + self.above[0] + self.bins[0].iter().map(|&c| u32::from(c)).sum::<u32>()
+        self.counts[0].iter().map(|&c| u32::from(c)).sum()
     }
 }
 

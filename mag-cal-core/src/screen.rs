@@ -166,9 +166,13 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
         rules: scan.rules,
         screen: None,
     };
+    // The window of the first histograms: the bounds of the subsample
+    // (rows beyond them count below or above the window; a clip level is
+    // an extreme that many rows share, so the subsample has it too).
+    let every = stride(scan.used);
     let mut first = None;
     for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-        bounds(block, prev, &rows, &mut first);
+        bounds(block, prev, &rows, every, &mut first);
     }
     let (box_lo, box_hi) = first.unwrap_or(([T::zero(); 3], [T::zero(); 3]));
     let (mut lo, mut hi) = (box_lo, box_hi);
@@ -233,16 +237,17 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     (median, spread, rules, passes + 1)
 }
 
-/// Widens `acc` (smallest and largest value of each axis) by the rows of
-/// `block` the gate passes.
+/// Widens `acc` (smallest and largest value of each axis) by every
+/// `stride`-th row of `block` that the gate passes.
 #[inline(never)]
 fn bounds<T: Real, S: Sample>(
     block: &[S],
     prev: Option<&S>,
     gate: &Gate<T>,
+    stride: usize,
     acc: &mut Option<([T; 3], [T; 3])>,
 ) {
-    for y in gate.rows(block, prev) {
+    for y in gate.rows_every(block, prev, stride) {
         let (lo, hi) = acc.get_or_insert((y, y));
         for ((l, u), v) in lo.iter_mut().zip(hi.iter_mut()).zip(y) {
             *l = smaller(*l, v);
@@ -263,10 +268,15 @@ fn fill_first<T: Real, S: Sample>(
     h: &mut AxisHistograms<T>,
 ) {
     for y in gate.rows(block, prev) {
-        for ((&v, (&l, &u)), n) in y.iter().zip(lo.iter().zip(hi)).zip(at.iter_mut()) {
-            n[0] += usize::from(v == l);
-            n[1] += usize::from(v == u);
-        }
+        // Written out per axis (a loop over the axes stays one at
+        // opt-level "s").
+        let [a0, a1, a2] = at;
+        a0[0] += usize::from(y[0] == lo[0]);
+        a0[1] += usize::from(y[0] == hi[0]);
+        a1[0] += usize::from(y[1] == lo[1]);
+        a1[1] += usize::from(y[1] == hi[1]);
+        a2[0] += usize::from(y[2] == lo[2]);
+        a2[1] += usize::from(y[2] == hi[2]);
         h.add(y);
     }
 }
