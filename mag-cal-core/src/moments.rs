@@ -275,12 +275,15 @@ fn select<T: Real, S: Sample>(
     stride: usize,
 ) -> usize {
     let half = T::lit(0.5);
+    // The cut by value: its constants then stay in registers rather than
+    // being read again after each histogram write.
+    let cut = cut.copied();
     let mut count = 0;
     for (i, s, last) in every(block, prev, stride) {
         let Some(y) = gate.pass(s, last) else {
             continue;
         };
-        if let Some(cut) = cut {
+        if let Some(cut) = &cut {
             let [ux, uy, uz] = cut.map.project(y);
             let e = (ux * ux + uy * uy + uz * uz - T::one()) * half;
             if let Some(h) = hist.as_deref_mut() {
@@ -309,9 +312,14 @@ fn for_marked<T: Real, S: Sample>(
     mut add: impl FnMut(T, T, T),
 ) {
     let (c, is) = (&norm.centre, norm.inv_scale);
-    for (words, chunk) in mask.iter().zip(block.chunks(32)) {
-        for (i, s) in chunk.iter().enumerate() {
-            if words & (1 << i) != 0 {
+    for (&word, chunk) in mask.iter().zip(block.chunks(32)) {
+        // Only the set bits, lowest first: a subsample's rows cost
+        // nothing between them.
+        let mut bits = word;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if let Some(s) = chunk.get(i) {
                 let [x, y, z] = s.xyz::<T>();
                 add((x - c.x) * is, (y - c.y) * is, (z - c.z) * is);
             }

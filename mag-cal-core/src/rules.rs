@@ -155,10 +155,11 @@ impl<T: Real> Rules<T> {
 
     #[inline(always)]
     fn clipped(&self, v: &[T; 3]) -> bool {
+        // Written out per axis: the iterator form keeps the row in memory
+        // at opt-level "s", in every gated pass.
+        let [[l0, h0], [l1, h1], [l2, h2]] = self.clip;
         self.clipping
-            && v.iter()
-                .zip(&self.clip)
-                .any(|(&x, &[lo, hi])| x == lo || x == hi)
+            && ((v[0] == l0) | (v[0] == h0) | (v[1] == l1) | (v[1] == h1) | (v[2] == l2) | (v[2] == h2))
     }
 }
 
@@ -248,19 +249,6 @@ impl<T: Real> Gate<T> {
 
     /// The rows of `block` the gate passes; `prev` is the row before the
     /// block in the whole slice.
-    /// [`Gate::rows`] over every `stride`-th row of `block`, from the
-    /// first (a fixed subsample; the repetition rule reads the row before
-    /// each).
-    #[inline(always)]
-    pub(crate) fn rows_every<'a, S: Sample>(
-        &'a self,
-        block: &'a [S],
-        prev: Option<&'a S>,
-        stride: usize,
-    ) -> impl Iterator<Item = [T; 3]> + 'a {
-        every(block, prev, stride).filter_map(move |(_, s, last)| self.pass(s, last))
-    }
-
     #[inline(always)]
     pub(crate) fn rows<'a, S: Sample>(
         &'a self,
@@ -449,13 +437,19 @@ pub(crate) fn every<'a, S>(
     prev: Option<&'a S>,
     stride: usize,
 ) -> impl Iterator<Item = (usize, &'a S, Option<&'a S>)> + 'a {
-    let rows = block.iter().enumerate().step_by(stride.max(1));
-    rows.map(move |(i, s)| {
+    // An index stepped by hand: `step_by` divides the length by the
+    // stride, and its loop is longer at opt-level "s".
+    let step = stride.max(1);
+    let mut i = 0;
+    core::iter::from_fn(move || {
+        let s = block.get(i)?;
         let last = match i.checked_sub(1) {
             Some(j) => block.get(j),
             None => prev,
         };
-        (i, s, last)
+        let at = i;
+        i = i.saturating_add(step);
+        Some((at, s, last))
     })
 }
 

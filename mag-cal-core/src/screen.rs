@@ -23,7 +23,7 @@
 use crate::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
 use crate::linalg::{larger, smaller};
 use crate::normalize::{Normalization, Scan};
-use crate::rules::{count_drops, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
+use crate::rules::{count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
@@ -247,7 +247,10 @@ fn bounds<T: Real, S: Sample>(
     stride: usize,
     acc: &mut Option<([T; 3], [T; 3])>,
 ) {
-    for y in gate.rows_every(block, prev, stride) {
+    for (_, s, last) in every(block, prev, stride) {
+        let Some(y) = gate.pass(s, last) else {
+            continue;
+        };
         let (lo, hi) = acc.get_or_insert((y, y));
         for ((l, u), v) in lo.iter_mut().zip(hi.iter_mut()).zip(y) {
             *l = smaller(*l, v);
@@ -332,7 +335,10 @@ fn distances<T: Real, S: Sample>(
     stride: usize,
     h: &mut LogHistogram,
 ) {
-    for y in gate.rows_every(block, prev, stride) {
+    for (_, s, last) in every(block, prev, stride) {
+        let Some(y) = gate.pass(s, last) else {
+            continue;
+        };
         let d = [
             (y[0] - c[0]) * inv_spread,
             (y[1] - c[1]) * inv_spread,
@@ -354,7 +360,10 @@ fn shell_residuals<T: Real, S: Sample>(
     stride: usize,
     h: &mut LogHistogram,
 ) {
-    for y in gate.rows_every(block, prev, stride) {
+    for (_, s, last) in every(block, prev, stride) {
+        let Some(y) = gate.pass(s, last) else {
+            continue;
+        };
         let d = [
             (y[0] - c[0]) * inv_m,
             (y[1] - c[1]) * inv_m,
