@@ -160,12 +160,7 @@ impl<T: Real> Moments<T> {
 
     /// Number of samples summed (the moment of degree 0).
     pub fn count(&self) -> usize {
-        let n = self.sums[0].to_f64();
-        if n >= 0.0 {
-            n as usize
-        } else {
-            0
-        }
+        self.sums[0].to_count()
     }
 
     /// `n sum|x|^4 / (sum|x|^2)^2`: 1 for samples on a sphere about the

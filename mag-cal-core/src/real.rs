@@ -24,6 +24,10 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     fn to_f64(self) -> f64;
     /// Converts a count, exactly up to `2^24` (`f32`) or `2^53` (`f64`).
     fn from_count(n: usize) -> Self;
+    /// A count back from the type (truncated; negative values and NaN give
+    /// 0, values beyond `usize::MAX` saturate), without an `f64` detour
+    /// (soft-float on a Cortex-M4F).
+    fn to_count(self) -> usize;
     /// Converts an `f32` (exact for both types).
     fn from_single(x: f32) -> Self;
     /// Rounds to `f32` (the identity for `f32`; out-of-range `f64` values
@@ -66,6 +70,10 @@ impl Real for f32 {
     #[inline]
     fn from_count(n: usize) -> Self {
         n as f32
+    }
+    #[inline]
+    fn to_count(self) -> usize {
+        self as usize
     }
     #[inline]
     fn from_single(x: f32) -> Self {
@@ -119,6 +127,10 @@ impl Real for f64 {
     #[inline]
     fn from_count(n: usize) -> Self {
         n as f64
+    }
+    #[inline]
+    fn to_count(self) -> usize {
+        self as usize
     }
     #[inline]
     fn from_single(x: f32) -> Self {

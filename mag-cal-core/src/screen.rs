@@ -293,7 +293,9 @@ fn clip_levels<T: Real>(
     (lo, hi): (&[T; 3], &[T; 3]),
     at: &[[usize; 2]; 3],
 ) -> [[T; 2]; 3] {
-    let many = ((used as f64 * CLIP_SHARE) as usize).max(CLIP_MIN_ROWS);
+    // `used * CLIP_SHARE` in integers (no soft-float `f64` on the target).
+    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
+    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
     let level = |v: T, n: usize| {
         if n >= many && n <= used / 2 {
             v
