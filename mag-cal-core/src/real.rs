@@ -157,9 +157,9 @@ impl Real for f64 {
 /// The one `unsafe` block of the crate, allowed here for a measured
 /// reason: the Newton `rsqrt` it replaces costs 20 instructions a call,
 /// and the per-sample passes call it once a row (LS9 + ADC2 on 1000 clean
-/// samples: 425 080 -> 399 616 instructions under `cargo xtask bench`;
-/// the direction and final passes also get shorter in cycles, 14 for
-/// `VSQRT` against about 30 for the dependent Newton steps).
+/// samples: 425 080 -> 399 160 instructions under `cargo xtask bench`;
+/// in cycles, by the Cortex-M4 manual's figures, 14 for `VSQRT` against
+/// about 30 for the dependent Newton steps: an estimate, not measured).
 #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
 #[allow(unsafe_code)]
 #[inline(always)]

@@ -159,7 +159,12 @@ impl<T: Real> Rules<T> {
         // at opt-level "s", in every gated pass.
         let [[l0, h0], [l1, h1], [l2, h2]] = self.clip;
         self.clipping
-            && ((v[0] == l0) | (v[0] == h0) | (v[1] == l1) | (v[1] == h1) | (v[2] == l2) | (v[2] == h2))
+            && ((v[0] == l0)
+                | (v[0] == h0)
+                | (v[1] == l1)
+                | (v[1] == h1)
+                | (v[2] == l2)
+                | (v[2] == h2))
     }
 }
 

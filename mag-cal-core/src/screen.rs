@@ -23,7 +23,9 @@
 use crate::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
 use crate::linalg::{larger, smaller};
 use crate::normalize::{Normalization, Scan};
-use crate::rules::{count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE};
+use crate::rules::{
+    count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE,
+};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
