@@ -32,7 +32,7 @@ Outliers (unless --plain): rows that are not finite or too large are dropped,
 and so are glitches: exact (0, 0, 0) rows, rows equal to the row before, and
 rows at an axis's clip level (an extreme value many rows share). A plain fit
 of the rest is kept when it is clean (no residual beyond 5 robust standard
-deviations, no systematic misfit); otherwise rows farther than 2.5 median
+deviations, their RMS at most 1.25 of them, no systematic misfit); otherwise rows farther than 2.5 median
 distances from the median centre are screened out, and rows whose calibrated
 norm is off the unit sphere by more than 3.5 robust standard deviations are
 rejected. The report counts every row once (used + dropped + screened +
@@ -383,6 +383,7 @@ mod tests {
     fn the_outlier_help_quotes_the_core_constants() {
         for (value, words) in [
             (mag_cal_core::CLEAN_LIMIT, "beyond {} robust standard"),
+            (mag_cal_core::CLEAN_TAIL, "RMS at most {} of them"),
             (
                 mag_cal_core::screen::SCREEN_RADIUS,
                 "farther than {} median",

@@ -72,7 +72,8 @@
 //!    precision, `(0, 0, 0)`, on the integer rails, equal to the row
 //!    before, at a clip level), and counts them by rule ([`Drops`]);
 //! 2. fits plainly, and keeps that fit when no residual exceeds
-//!    [`CLEAN_LIMIT`] robust standard deviations and nothing misfits (clean
+//!    [`CLEAN_LIMIT`] robust standard deviations, their RMS is at most
+//!    [`CLEAN_TAIL`] robust standard deviations and nothing misfits (clean
 //!    data pay one extra pass's worth of figures, no robust pass);
 //! 3. otherwise screens the rows far from a coordinate-wise median centre,
 //!    starts from the crude sphere (median centre, median distance), and
@@ -310,6 +311,12 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
 /// (`docs/benchmarks.md`).
 pub const CLEAN_LIMIT: f64 = 5.0;
 
+/// A plain fit is taken as the robust one only when the RMS of its radial
+/// residuals is at most this many times their robust sigma: about 1 for
+/// Gaussian noise (0.8 for quantisation), more when a share of the rows
+/// lies off the ellipsoid.
+pub const CLEAN_TAIL: f64 = 1.25;
+
 /// [`calibrate`] with the LS solve and the method's step resolved.
 fn pipeline<T: Real, S: Sample>(
     samples: &[S],
@@ -374,8 +381,13 @@ fn plain_path<T: Real, S: Sample>(
     let fit = done.fit;
     let sigma = fit.report.quality.fit_error;
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+    // Residuals with heavier tails than noise (their RMS well above their
+    // robust sigma) are a contamination that broadened every residual, so
+    // that none stands out.
+    let rms = fit.report.radial_rms;
     let clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
         && clean_limit(done.final_max, sigma)
+        && !(rms > sigma * T::lit(CLEAN_TAIL))
         && !done.misfit;
     Ok((fit, clean))
 }
