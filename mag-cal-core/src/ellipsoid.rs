@@ -4,8 +4,8 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 use crate::linalg::{
-    cholesky, cholesky_solve, from_array, min_max, solve3, solve_lower, solve_lower_transposed,
-    sym_eigen, sym_sqrt_and_inv_sqrt, to_array,
+    cholesky, cholesky_in_place, cholesky_solve, from_array, min_max, solve3, solve_lower,
+    solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt, to_array,
 };
 use crate::moments::Moments;
 use crate::{Error, Real};
@@ -97,17 +97,20 @@ pub fn fit_with<T: Real>(s: &SMatrix<T, 10, 10>, solve: Solve<T>) -> Result<Elli
 /// arrays then occupy stack only during the call (docs/benchmarks.md).
 #[inline(never)]
 fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let s = to_array(s);
+    // Straight from `s`, not through a 10x10 copy (400 bytes of stack in
+    // `f32` under the robust path's refits).
     let mut s9 = [[T::zero(); 9]; 9];
     let mut rhs = [T::zero(); 9];
     for i in 0..9 {
         for j in 0..9 {
-            s9[i][j] = s[i][j];
+            s9[i][j] = s[(i, j)];
         }
-        rhs[i] = s[i][9];
+        rhs[i] = s[(i, 9)];
     }
-    let l = cholesky(&s9).ok_or(Error::SingularSystem)?;
-    let v9 = cholesky_solve(&l, &rhs);
+    if !cholesky_in_place(&mut s9) {
+        return Err(Error::SingularSystem);
+    }
+    let v9 = cholesky_solve(&s9, &rhs);
     let mut v = SVector::<T, 10>::zeros();
     for (x, &y) in v.iter_mut().zip(&v9) {
         *x = y;

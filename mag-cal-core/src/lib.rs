@@ -377,7 +377,8 @@ fn plain_path<T: Real, S: Sample>(
         weights: methods::Weights { gate, sigma: None },
         robust_passes: 0,
     };
-    let done = finish(samples, config, &start, step, figures)?;
+    let est = method_step(samples, config, &start, step, &figures)?;
+    let done = finish(samples, config, &start, &est, &mut figures)?;
     let fit = done.fit;
     let sigma = fit.report.quality.fit_error;
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
@@ -403,6 +404,21 @@ fn robust_path<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
+    let (start, mut figures) = robust_start(samples, config, scan, ls_solve)?;
+    let est = method_step(samples, config, &start, step, &figures)?;
+    finish(samples, config, &start, &est, &mut figures).map(|done| done.fit)
+}
+
+/// The robust path up to the method: the screening and the robust LS fit,
+/// and the figures they give. Out of line: their moments and fits take
+/// stack only until the method starts.
+#[inline(never)]
+fn robust_start<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+) -> Result<(Start<T>, Figures<T>), Error> {
     let mut figures = Figures::new(scan, config, true);
     let screening = screen::screen(samples, scan)?;
     figures.drops = screening.drops;
@@ -433,7 +449,7 @@ fn robust_path<T: Real, S: Sample>(
         },
         robust_passes: screening.passes + fitted.passes,
     };
-    finish(samples, config, &start, step, figures).map(|done| done.fit)
+    Ok((start, figures))
 }
 
 /// A fit and what decides whether the plain one is clean.
@@ -448,19 +464,31 @@ struct Finished<T: Real> {
     misfit: bool,
 }
 
-/// The method from the start, the final pass, and the judging.
-fn finish<T: Real, S: Sample>(
+/// The method from the start; a failure is judged on the figures so far.
+/// Out of line, as [`finish`]: the method's passes and the final pass then
+/// take their stack one after the other, not one under the other.
+#[inline(never)]
+fn method_step<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
     start: &Start<T>,
     step: methods::Step<T, S>,
-    mut figures: Figures<T>,
+    figures: &Figures<T>,
+) -> Result<methods::Estimate<T>, Error> {
+    step(samples, &start.norm, &start.ls, config, &start.weights)
+        .map_err(|e| judge_failure(figures, config, e))
+}
+
+/// The final pass after the method's estimate `est`, and the judging.
+#[inline(never)]
+fn finish<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    start: &Start<T>,
+    est: &methods::Estimate<T>,
+    figures: &mut Figures<T>,
 ) -> Result<Finished<T>, Error> {
     let norm = &start.norm;
-    let est = match step(samples, norm, &start.ls, config, &start.weights) {
-        Ok(est) => est,
-        Err(e) => return Err(judge_failure(&figures, config, e)),
-    };
     figures.step_warnings = est.warnings;
     let distortion = quality::distortion(&est.w)?;
     figures.distortion = Some(distortion);
@@ -485,7 +513,7 @@ fn finish<T: Real, S: Sample>(
         limit,
     ) {
         Ok(last) => last,
-        Err(e) => return Err(judge_failure(&figures, config, e)),
+        Err(e) => return Err(judge_failure(figures, config, e)),
     };
     figures.used = Some(last.used);
     figures.coverage = Some(last.coverage);
@@ -497,7 +525,7 @@ fn finish<T: Real, S: Sample>(
     figures.field_deviation = config
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
-    let warnings = quality::judge(&figures, &config.thresholds)?;
+    let warnings = quality::judge(figures, &config.thresholds)?;
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),

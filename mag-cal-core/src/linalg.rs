@@ -336,26 +336,42 @@ pub(crate) fn tridiagonal<T: Real, const N: usize>(m: &Mat<T, N>) -> ([T; N], [T
 /// positive definite matrix (its lower triangle is read), or `None` when a
 /// pivot is not positive and finite.
 pub(crate) fn cholesky<T: Real, const N: usize>(a: &Mat<T, N>) -> Option<Mat<T, N>> {
-    let mut l = [[T::zero(); N]; N];
-    for j in 0..N {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= l[j][k] * l[j][k];
-        }
-        if !(d > T::zero()) || !d.is_finite() {
-            return None;
-        }
-        let djj = d.sqrt();
-        l[j][j] = djj;
-        for i in (j + 1)..N {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
-            l[i][j] = s / djj;
+    let mut l = *a;
+    if !cholesky_in_place(&mut l) {
+        return None;
+    }
+    for (i, row) in l.iter_mut().enumerate() {
+        for x in row.iter_mut().skip(i + 1) {
+            *x = T::zero();
         }
     }
     Some(l)
+}
+
+/// [`cholesky`] in place: the lower triangle of `a` becomes `L` (the
+/// upper one is left as it was, and the solves below never read it);
+/// false when a pivot is not positive and finite. No copy of the matrix:
+/// the 9x9 LS solve takes its stack only once.
+pub(crate) fn cholesky_in_place<T: Real, const N: usize>(a: &mut Mat<T, N>) -> bool {
+    for j in 0..N {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= a[j][k] * a[j][k];
+        }
+        if !(d > T::zero()) || !d.is_finite() {
+            return false;
+        }
+        let djj = d.sqrt();
+        a[j][j] = djj;
+        for i in (j + 1)..N {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= a[i][k] * a[j][k];
+            }
+            a[i][j] = s / djj;
+        }
+    }
+    true
 }
 
 /// Solves `L x = b` for a lower triangular `L` with a non-zero diagonal.
