@@ -303,10 +303,11 @@ fn sums<T: Real, S: Sample>(
 /// 153 instructions a sample (`f32`, `[i16; 3]`, opt-level "s"); split, each
 /// loop fits: about 51 instructions a sample and 37, and the pass takes 94
 /// with the chunk and block overhead and the final 3x3 products. The
-/// buffer is 16 bytes a sample in `f32` (704 bytes of stack); 44 samples
-/// make three chunks of a [`BLOCK`] (32 took 1 instruction a sample more,
-/// 64 would save 0.8 for 320 bytes more).
-const CHUNK: usize = 44;
+/// buffer is 16 bytes a sample in `f32` (512 bytes of stack); 32 samples
+/// make four chunks of a [`BLOCK`] (44, three chunks, took 1 instruction a
+/// sample less for 192 bytes more stack, which the 4 KiB stack budget of
+/// the robust path does not leave).
+const CHUNK: usize = 32;
 
 /// `[u, 1/|u|]` of each finite sample of `chunk` into `out` (zeros for a
 /// sample without a direction: non-finite, or at the fitted centre), and

@@ -237,6 +237,9 @@ fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error
 /// From quadric coefficients `v` to the ellipsoid: `A`, `p`,
 /// `b' = -A^-1 p`, `k = b'^T A b' - v9`, `M' = A / k`. The sign of `v` does
 /// not matter (it cancels in `A / k`). Refuses anything but an ellipsoid.
+// Out of line: its eigen decomposition's locals then take stack after the
+// solve has returned, not under it.
+#[inline(never)]
 pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> {
     if !v.iter().all(|x| x.is_finite()) {
         return Err(Error::SingularSystem);

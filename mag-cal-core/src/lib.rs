@@ -404,13 +404,14 @@ fn robust_path<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    let (start, mut figures) = robust_start(samples, config, scan, ls_solve)?;
+    let mut figures = Figures::new(scan, config, true);
+    let start = robust_start(samples, config, scan, ls_solve, &mut figures)?;
     let est = method_step(samples, config, &start, step, &figures)?;
     finish(samples, config, &start, &est, &mut figures).map(|done| done.fit)
 }
 
 /// The robust path up to the method: the screening and the robust LS fit,
-/// and the figures they give. Out of line: their moments and fits take
+/// and the figures they give (into `figures`). Out of line: their moments and fits take
 /// stack only until the method starts.
 #[inline(never)]
 fn robust_start<T: Real, S: Sample>(
@@ -418,8 +419,8 @@ fn robust_start<T: Real, S: Sample>(
     config: &Config,
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
-) -> Result<(Start<T>, Figures<T>), Error> {
-    let mut figures = Figures::new(scan, config, true);
+    figures: &mut Figures<T>,
+) -> Result<Start<T>, Error> {
     let screening = screen::screen(samples, scan)?;
     figures.drops = screening.drops;
     figures.valid = screening.valid;
@@ -434,7 +435,7 @@ fn robust_start<T: Real, S: Sample>(
         Err(e) => {
             // No ellipsoid at all: judged by the crude sphere's fit error.
             figures.fit_error = Some(screening.sphere_error);
-            return Err(judge_failure(&figures, config, e));
+            return Err(judge_failure(figures, config, e));
         }
     };
     let kept = fitted.moments.count();
@@ -449,7 +450,7 @@ fn robust_start<T: Real, S: Sample>(
         },
         robust_passes: screening.passes + fitted.passes,
     };
-    Ok((start, figures))
+    Ok(start)
 }
 
 /// A fit and what decides whether the plain one is clean.

@@ -259,15 +259,16 @@ fn stack_run() -> ! {
         }
     }
     // The same samples with every tenth row displaced by about 0.3 of the
-    // field (96 counts of 320 on each axis, a third each): the robust path
+    // field (55 counts on each axis: 95 of 320) and every 50th row zero:
+    // the plain attempt with the glitch rules, then the robust path
     // (screening, robust LS, weighted passes), whose stack the clean run
     // does not reach.
     let dirty = cortex_m::singleton!(: [[i16; 3]; N] = [[0; 3]; N]).expect("taken once");
     for (i, (d, s)) in dirty.iter_mut().zip(samples).enumerate() {
-        *d = if i % 10 == 3 {
-            s.map(|v| v.saturating_add(55))
-        } else {
-            *s
+        *d = match i % 50 {
+            7 => [0; 3],
+            k if k % 10 == 3 => s.map(|v| v.saturating_add(55)),
+            _ => *s,
         };
     }
     for method in Method::ALL {
