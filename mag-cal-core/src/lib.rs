@@ -325,11 +325,14 @@ fn pipeline<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples, config.robust)?;
-    match plain_path(samples, config, &scan, ls_solve, step) {
-        Ok((fit, clean)) if clean || !config.robust => Ok(fit),
-        Err(e) if !config.robust => Err(e),
-        _ => robust_path(samples, config, &scan, ls_solve, step),
+    // The plain result is returned as it is, or not at all: this frame
+    // then holds no second fit under the robust path (224 bytes of stack).
+    let mut clean = false;
+    let plain = plain_path(samples, config, &scan, ls_solve, step, &mut clean);
+    if clean || !config.robust {
+        return plain;
     }
+    robust_path(samples, config, &scan, ls_solve, step)
 }
 
 /// What the steps before the method leave for it and for the judging.
@@ -341,7 +344,7 @@ struct Start<T: Real> {
 }
 
 /// The plain pipeline: every row the scan kept, weight 1. Returns the fit
-/// and whether it is clean ([`CLEAN_LIMIT`]). Out of line, as the robust
+/// and sets `clean` when it is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`]). Out of line, as the robust
 /// path: inlined, both paths' locals would share `pipeline`'s frame.
 #[inline(never)]
 fn plain_path<T: Real, S: Sample>(
@@ -350,7 +353,8 @@ fn plain_path<T: Real, S: Sample>(
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
-) -> Result<(Fit<T>, bool), Error> {
+    clean: &mut bool,
+) -> Result<Fit<T>, Error> {
     let norm = scan.norm;
     let mut figures = Figures::new(scan, config, false);
     // The rows the rules dropped stay out; without drops the scan's rules
@@ -386,11 +390,12 @@ fn plain_path<T: Real, S: Sample>(
     // robust sigma) are a contamination that broadened every residual, so
     // that none stands out.
     let rms = fit.report.radial_rms;
-    let clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
+    let is_clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
         && clean_limit(done.final_max, sigma)
         && !(rms > sigma * T::lit(CLEAN_TAIL))
         && !done.misfit;
-    Ok((fit, clean))
+    *clean = is_clean;
+    Ok(fit)
 }
 
 /// The robust pipeline (section 14 of the design document): screening, the
