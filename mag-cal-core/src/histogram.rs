@@ -86,12 +86,21 @@ impl LogHistogram {
             return None;
         }
         let target = p * T::from_count(total as usize);
-        let mut below = T::zero();
+        // The bin by integer counts: the first whose running count reaches
+        // `ceil(target)` (the same bin as float sums, which are exact for
+        // these counts), without a conversion per bin.
+        let floor = target.to_count();
+        let need = if T::from_count(floor) < target {
+            floor + 1
+        } else {
+            floor
+        };
+        let mut below = 0usize;
         for (k, &c) in self.bins.iter().enumerate() {
-            let c = T::from_count(usize::from(c));
-            if below + c >= target && c > T::zero() {
+            let c = usize::from(c);
+            if c > 0 && below + c >= need {
                 let (lo, hi) = edges::<T>(k);
-                let frac = (target - below) / c;
+                let frac = (target - T::from_count(below)) / T::from_count(c);
                 return Some(lo + (hi - lo) * frac);
             }
             below += c;

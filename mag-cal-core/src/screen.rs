@@ -272,18 +272,19 @@ fn fill_first<T: Real, S: Sample>(
     at: &mut [[usize; 2]; 3],
     h: &mut AxisHistograms<T>,
 ) {
+    // Counted in locals, written out per axis (a loop over the axes stays
+    // one at opt-level "s", and counts in memory are stored every row).
+    let [[mut n0, mut n1], [mut n2, mut n3], [mut n4, mut n5]] = *at;
     for y in gate.rows(block, prev) {
-        // Written out per axis (a loop over the axes stays one at
-        // opt-level "s").
-        let [a0, a1, a2] = at;
-        a0[0] += usize::from(y[0] == lo[0]);
-        a0[1] += usize::from(y[0] == hi[0]);
-        a1[0] += usize::from(y[1] == lo[1]);
-        a1[1] += usize::from(y[1] == hi[1]);
-        a2[0] += usize::from(y[2] == lo[2]);
-        a2[1] += usize::from(y[2] == hi[2]);
+        n0 += usize::from(y[0] == lo[0]);
+        n1 += usize::from(y[0] == hi[0]);
+        n2 += usize::from(y[1] == lo[1]);
+        n3 += usize::from(y[1] == hi[1]);
+        n4 += usize::from(y[2] == lo[2]);
+        n5 += usize::from(y[2] == hi[2]);
         h.add(y);
     }
+    *at = [[n0, n1], [n2, n3], [n4, n5]];
 }
 
 /// The clip levels: an axis's extreme value that at least
