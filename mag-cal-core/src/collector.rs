@@ -19,6 +19,18 @@
 //! [`Collector::progress`] re-examines at most [`CELLS`] samples, one per
 //! cell.
 //!
+//! # Dirty input
+//!
+//! Glitch rows (exactly `(0, 0, 0)`, a component on an integer type's
+//! rails) are refused as [`Offer::Glitch`], the rows [`crate::calibrate`]
+//! would drop anyway; an exact repeat is [`Offer::TooClose`]. Once
+//! [`OUTLIER_MIN_SAMPLES`] samples are stored, a reading farther than
+//! [`OUTLIER_RADII`] radii from the running centre is refused as
+//! [`Offer::Outlier`]: one wild reading in the running sums would move the
+//! centre, and with it every cell, by more than the field. Moderate
+//! disturbances (a magnet passing at a distance) are left to the
+//! calibration's own outlier handling.
+//!
 //! # Numerical choices
 //!
 //! **Running centre.** Directions are taken from a running estimate `c` of
@@ -170,12 +182,28 @@ const PRIOR_WEIGHT: f32 = 0.001;
 /// a call: at 4 it revisits every sample within about `len / 3` calls.
 pub const RESCAN_PER_OFFER: usize = 4;
 
+/// Once this many samples are stored, a reading farther than
+/// [`OUTLIER_RADII`] radii from the running centre is refused as
+/// [`Offer::Outlier`]: before that the centre and radius estimates are
+/// too rough to judge by.
+pub const OUTLIER_MIN_SAMPLES: usize = 20;
+
+/// Readings farther than this many radii (the RMS distance of the stored
+/// samples from the running centre) are wild: an ellipsoid of axis ratio 4
+/// (the largest distortion a calibration accepts) reaches 1.7 radii from
+/// its centre, and a centre still biased by partial coverage adds less
+/// than one. One such reading, left in the running sums, would move the
+/// centre estimate by more than the field (its weight grows with the
+/// square of its distance).
+pub const OUTLIER_RADII: f32 = 3.0;
+
 /// No witness for a cell yet.
 const NO_WITNESS: usize = usize::MAX;
 
 /// What [`Collector::offer`] did with a sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Offer {
     /// The sample was stored.
     Accepted,
@@ -190,6 +218,14 @@ pub enum Offer {
     NotFinite,
     /// Refused: the collector holds `N` samples already.
     Full,
+    /// Refused: a glitch, as [`crate::calibrate`]'s drop rules see one:
+    /// exactly `(0, 0, 0)`, or a component on the integer type's rails
+    /// (an exact repeat is [`Offer::TooClose`]).
+    Glitch,
+    /// Refused: farther than [`OUTLIER_RADII`] radii from the running
+    /// centre, once [`OUTLIER_MIN_SAMPLES`] samples are stored (a wild
+    /// reading: an I2C glitch, a magnet held against the sensor).
+    Outlier,
 }
 
 /// How far the collection is, as reported by [`Collector::progress`].
@@ -290,6 +326,14 @@ impl CentreFit {
             .chain(core::iter::once(&f.mean_q))
             .all(|v| v.is_finite());
         finite.then_some(f)
+    }
+
+    /// Mean squared distance of the samples from `centre` (sensor units):
+    /// `mean|x - c|^2 = mean(q) - 2 c.mean(x) + |c|^2` with `c` relative to
+    /// the origin.
+    fn radius_sq(&self, centre: [f32; 3]) -> f32 {
+        let c = sub(centre, self.origin);
+        self.mean_q - 2.0 * dot(c, self.mean) + dot(c, c)
     }
 
     /// The centre estimate, sensor units.
@@ -484,7 +528,8 @@ impl<S: Sample, const N: usize> Collector<S, N> {
 
     /// Offers one sample: stores it and returns [`Offer::Accepted`], or says
     /// why not. The checks, in order: [`Offer::Full`],
-    /// [`Offer::NotFinite`], [`Offer::TooClose`].
+    /// [`Offer::NotFinite`], [`Offer::Glitch`], [`Offer::Outlier`],
+    /// [`Offer::TooClose`].
     ///
     /// Constant time: the running sums are updated, the centre re-solved
     /// (3x3), the direction compared with the last stored sample's only,
@@ -516,6 +561,16 @@ impl<S: Sample, const N: usize> Collector<S, N> {
         let y = sample.xyz::<f32>();
         if !y.iter().all(|v| v.is_finite()) {
             return Offer::NotFinite;
+        }
+        if sample.is_zero() || sample.on_rails() {
+            return Offer::Glitch;
+        }
+        if self.samples.len() >= OUTLIER_MIN_SAMPLES {
+            let d = sub(y, self.centre);
+            let r_sq = self.fit.radius_sq(self.centre);
+            if dot(d, d) > OUTLIER_RADII * OUTLIER_RADII * r_sq {
+                return Offer::Outlier;
+            }
         }
         let Some(fit) = self.fit.with(y) else {
             return Offer::NotFinite;

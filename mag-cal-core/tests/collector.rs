@@ -421,3 +421,53 @@ fn hostile_input_never_panics() {
     let _ = (cf.progress(), ci.progress(), ch.progress());
     assert!(ci.len() <= 64 && ch.len() <= 64);
 }
+
+/// Wild readings (I2C glitches over the i16 range), zero rows and rows on
+/// the rails, offered among a collection, are refused and named; the
+/// collection, its centre and its calibration are those of the clean
+/// readings alone.
+#[test]
+fn wild_readings_and_glitches_are_refused() {
+    let dirs = spiral(1.0, -1.0, 900, 0.25);
+    let mut clean: Collector<[i16; 3], 1000> = Collector::default();
+    feed(&mut clean, &mut Sensor::new(true), &dirs);
+    let mut dirty: Collector<[i16; 3], 1000> = Collector::default();
+    let mut sensor = Sensor::new(true);
+    let mut rng = Rng(99);
+    let (mut outliers, mut glitches) = (0, 0);
+    for (k, h) in dirs.iter().enumerate() {
+        let reading = sensor.read(h);
+        if k >= 40 && k % 7 == 0 {
+            let wild = [0, 1, 2].map(|_| (rng.uniform() * 60000.0 - 30000.0) as i16);
+            // A wild reading may land near the sphere by chance (then it is
+            // an ordinary, if noisy, sample); those far off are refused.
+            let d =
+                Vector3::new(f64::from(wild[0]), f64::from(wild[1]), f64::from(wild[2])) - sensor.b;
+            let offer = dirty.offer(wild);
+            if d.norm() > 4.0 * sensor.rho {
+                assert_eq!(offer, Offer::Outlier, "{wild:?}");
+                outliers += 1;
+            }
+        }
+        if k % 50 == 3 {
+            assert_eq!(dirty.offer([0, 0, 0]), Offer::Glitch);
+            assert_eq!(
+                dirty.offer([reading[0], i16::MAX, reading[2]]),
+                Offer::Glitch
+            );
+            glitches += 2;
+        }
+        dirty.offer(reading);
+    }
+    assert!(outliers > 100 && glitches == 36, "{outliers} {glitches}");
+    // The same clean readings were offered (the sensor's noise is drawn in
+    // the same order), so the same were kept.
+    assert_eq!(dirty.len(), clean.len());
+    assert_eq!(dirty.samples(), clean.samples());
+    assert_eq!(dirty.progress(), clean.progress());
+    let (a, b) = (
+        calibrate::<f32, _>(dirty.samples(), &Config::default()).unwrap(),
+        calibrate::<f32, _>(clean.samples(), &Config::default()).unwrap(),
+    );
+    assert_eq!(a.calibration, b.calibration);
+}
