@@ -170,7 +170,11 @@ impl RowFlags {
             ))
         })?;
         let selection = self.selection.to_core::<T>();
-        Ok(selection.classify(&cal, samples).collect())
+        // The rows as the fit would read them (integer counts as i16).
+        Ok(match crate::fit::counts(samples) {
+            Some(ints) => selection.classify(&cal, &ints).collect(),
+            None => selection.classify(&cal, samples).collect(),
+        })
     }
 }
 

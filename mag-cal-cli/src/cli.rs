@@ -29,8 +29,10 @@ No such triple, several, or no header: exit 2, listing the header's columns.
 'nan' and 'inf' are accepted and skipped by the fit (counted as dropped).
 
 Outliers (unless --plain): rows that are not finite or too large are dropped,
-and so are glitches: exact (0, 0, 0) rows, rows equal to the row before, and
-rows at an axis's clip level (an extreme value many rows share). A plain fit
+and so are glitches: exact (0, 0, 0) rows, rows equal to the row before,
+rows at an axis's clip level (an extreme value many rows share), and in a
+file of integer counts (every value an integer in i16's range, read as i16)
+rows with a component on the rails (+-32767, -32768). A plain fit
 of the rest is kept when it is clean (no residual beyond 5 robust standard
 deviations, their RMS at most 1.25 of them, no systematic misfit); otherwise rows farther than 2.5 median
 distances from the median centre are screened out, and rows whose calibrated

@@ -184,8 +184,14 @@ fn fit_in<T: Real>(
     config: &Config,
     precision: Precision,
 ) -> Result<Outcome, CliError> {
+    // Integer counts of an i16 sensor are calibrated as such, so that the
+    // rails rule sees them (`counts`).
+    let ints = counts(samples);
     let start = Instant::now();
-    let fit = calibrate::<T, [f64; 3]>(samples, config);
+    let fit = match &ints {
+        Some(ints) => calibrate::<T, [i16; 3]>(ints, config),
+        None => calibrate::<T, [f64; 3]>(samples, config),
+    };
     let elapsed = start.elapsed();
     let fit = fit?;
 
@@ -194,7 +200,10 @@ fn fit_in<T: Real>(
     let w = cal.soft_iron();
     let report = &fit.report;
     // What the fit did with each row, in precision `T` as the core decided.
-    let classes: Vec<SampleClass> = report.selection.classify(cal, samples).collect();
+    let classes: Vec<SampleClass> = match &ints {
+        Some(ints) => report.selection.classify(cal, ints).collect(),
+        None => report.selection.classify(cal, samples).collect(),
+    };
     // The calibrated norms of the rows the core used, for the spread figure.
     let norms = samples
         .iter()
@@ -234,6 +243,22 @@ fn fit_in<T: Real>(
         selection: SelectionJson::from_core(&report.selection),
         classes,
     })
+}
+
+/// The rows as `i16` counts when every value is an integer in `i16`'s
+/// range (a raw dump of a 16-bit sensor): the core's rails rule then drops
+/// rows with a component at `+-32767` or `-32768`, which in floating point
+/// would be ordinary values. `None` for any other file (a fraction, a
+/// non-finite or a larger value anywhere), read as `f64`.
+pub fn counts(samples: &[[f64; 3]]) -> Option<Vec<[i16; 3]>> {
+    let int = |v: f64| {
+        (v.fract() == 0.0 && (f64::from(i16::MIN)..=f64::from(i16::MAX)).contains(&v))
+            .then_some(v as i16)
+    };
+    samples
+        .iter()
+        .map(|r| Some([int(r[0])?, int(r[1])?, int(r[2])?]))
+        .collect()
 }
 
 /// Population standard deviation over mean of `values` (NaN when empty).

@@ -355,6 +355,26 @@ fn stdin_and_text_format() {
     assert!(near(shown, limit, 3), "{shown} vs {limit}");
 }
 
+/// A file of integer counts in the i16 range is read as i16 counts: rows
+/// with a component on the rails are dropped by the rails rule, and the
+/// rest calibrate as the clean file does.
+#[test]
+fn integer_counts_on_the_rails_are_dropped() {
+    let clean_path = real("icm20948_mag_300.csv");
+    let mut bytes = std::fs::read(&clean_path).expect("readable");
+    bytes.extend_from_slice(b"32767,29,161\n-40,-32768,12\n-231,29,32767\n");
+    let v = magcal(&["fit", "-", "--format", "json"], Some(&bytes)).json();
+    assert_accounts_for(&v, 303);
+    assert_eq!(v["drops"]["rails"], 3);
+    let clean = magcal(&["fit", &clean_path, "--format", "json"], None).json();
+    assert_eq!(counts(&v)[0], counts(&clean)[0]);
+    assert_same_calibration(&v, &clean, 1e-12);
+    // A fraction anywhere: read as f64, and 32767 is an ordinary value.
+    bytes.extend_from_slice(b"-231.5,29,161\n");
+    let f = magcal(&["fit", "-", "--format", "json"], Some(&bytes)).json();
+    assert_eq!(f["drops"]["rails"], 0);
+}
+
 #[test]
 fn non_finite_rows_are_dropped_and_counted() {
     let mut bytes = b"# x,y,z\nnan,1,2\n".to_vec();
