@@ -314,7 +314,8 @@ pub const CLEAN_LIMIT: f64 = 5.0;
 /// A plain fit is taken as the robust one only when the RMS of its radial
 /// residuals is at most this many times their robust sigma: about 1 for
 /// Gaussian noise (0.8 for quantisation), more when a share of the rows
-/// lies off the ellipsoid.
+/// lies off the ellipsoid. (Residuals at the level of rounding, an RMS
+/// below the square root of the type's epsilon, are not judged by it.)
 pub const CLEAN_TAIL: f64 = 1.25;
 
 /// [`calibrate`] with the LS solve and the method's step resolved.
@@ -388,11 +389,12 @@ fn plain_path<T: Real, S: Sample>(
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
     // Residuals with heavier tails than noise (their RMS well above their
     // robust sigma) are a contamination that broadened every residual, so
-    // that none stands out.
+    // that none stands out. Not at the level of rounding (below
+    // sqrt(eps) of the field), where the tails are the rounding's own.
     let rms = fit.report.radial_rms;
     let is_clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
         && clean_limit(done.final_max, sigma)
-        && !(rms > sigma * T::lit(CLEAN_TAIL))
+        && !(rms > sigma * T::lit(CLEAN_TAIL) && rms > T::EPSILON.sqrt())
         && !done.misfit;
     *clean = is_clean;
     Ok(fit)
