@@ -581,10 +581,18 @@ fn collect<I: I2c, D: DelayNs>(
     let mut decile = 0u8;
     let mut since_ready: Option<u32> = None;
     let mut readings = 0u32;
+    // Readings the collector itself refused: glitch rows, wild readings.
+    let mut refused = [0u32; 2];
     while readings < MAX_READINGS {
         readings += 1;
         if let Some((raw, meta)) = dev.next_clean(&reference) {
-            if collector.offer(raw) == Offer::Accepted {
+            let offer = collector.offer(raw);
+            match offer {
+                Offer::Glitch => refused[0] += 1,
+                Offer::Outlier => refused[1] += 1,
+                _ => {}
+            }
+            if offer == Offer::Accepted {
                 if meta.faulty {
                     dev.log.leaked += 1;
                 }
@@ -637,6 +645,14 @@ fn collect<I: I2c, D: DelayNs>(
         }
     }
     dev.monitor.end_phase();
+    if refused != [0, 0] {
+        info!(
+            "the collector refused {=u32} glitch rows (zero, rails) and {=u32} wild readings (beyond {=f32} radii)",
+            refused[0],
+            refused[1],
+            mag_cal_core::collector::OUTLIER_RADII
+        );
+    }
     let p = collector.progress();
     info!(
         "collection done after {=u32} readings: {=usize} samples, {=usize}/{=usize} cells, ready {=bool}",
