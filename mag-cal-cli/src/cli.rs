@@ -32,10 +32,11 @@ Outliers (unless --plain): rows that are not finite or too large are dropped,
 and so are glitches: exact (0, 0, 0) rows, rows equal to the row before,
 rows at an axis's clip level (an extreme value many rows share), and in a
 file of integer counts (every value an integer in i16's range, read as i16)
-rows with a component on the rails (+-32767, -32768). A plain fit
-of the rest is kept when it is clean (no residual beyond 5 robust standard
-deviations, their RMS at most 1.25 of them, no systematic misfit); otherwise rows farther than 2.5 median
-distances from the median centre are screened out, and rows whose calibrated
+rows with a component on the rails (+-32767, -32768). A plain fit of the
+rest is kept when it is clean (no residual beyond 5 robust standard
+deviations, their RMS at most 1.25 of them, no systematic misfit);
+otherwise rows farther than 2.5 median distances from the median centre are
+screened out, and rows whose calibrated
 norm is off the unit sphere by more than 3.5 robust standard deviations are
 rejected. The report counts every row once (used + dropped + screened +
 rejected = rows); the JSON's 'selection' lets 'magcal apply --flags' mark them.

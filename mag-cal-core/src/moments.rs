@@ -280,8 +280,9 @@ pub(crate) struct Cut<T: Real> {
 // the normalisation constants of one loop spill during the other.
 
 /// Marks in `mask` the rows of `block` (every `stride`-th, from the first)
-/// that the gate passes and the cut keeps, and returns their count; `hist`, when given, counts the cut's
-/// residual of every row the gate passes. A loop of its own: with the
+/// that the gate passes and the cut keeps, and returns their count;
+/// `hist`, when given, counts the cut's residual of every row the gate
+/// passes. A loop of its own: with the
 /// gate's and the cut's constants beside the 19 sums, one loop spilled
 /// (about 230 instructions a sample on a Cortex-M4F for this and
 /// [`sum_low`] together, against about 150 apart).

@@ -20,8 +20,9 @@
 //! left a few more silently wrong fits at 20-30 % contamination);
 //! without a subsample (fewer than twice that many rows) up to [`REFITS`]
 //! refits run on every row until the count repeats. Each pass on every row
-//! costs about 140 instructions a sample on a Cortex-M4F (the selection)
-//! plus about 85 (the moments of the rows kept). The method's own passes
+//! costs about 100 instructions a sample on a Cortex-M4F for the selection
+//! plus about 100 a kept row for its moments (an exec-log profile of a
+//! 10 % contaminated run, `docs/benchmarks.md`). The method's own passes
 //! then run with the same gate and a residual cut.
 
 use nalgebra::{Matrix3, Vector3};

@@ -432,7 +432,6 @@ impl<T: Real> Selection<T> {
     }
 }
 
-/// The slice in pieces of `size`, each with the row before it.
 /// Every `stride`-th row of `block` from the first, with its index and the
 /// row before it (`prev` for the first row of the block), which the
 /// repetition rule reads.
@@ -458,6 +457,7 @@ pub(crate) fn every<'a, S>(
     })
 }
 
+/// The slice in pieces of `size`, each with the row before it.
 #[inline(always)]
 pub(crate) fn pieces<S>(samples: &[S], size: usize) -> impl Iterator<Item = (Option<&S>, &[S])> {
     let mut prev = None;

@@ -48,8 +48,10 @@ pub const MAX_LEVELS: u32 = 12;
 /// robust LS refits before the last ([`crate::robust`]), run on a fixed
 /// subsample of about this many rows (every `k`-th row, `k` at least 1).
 /// A quantile or the set of outliers is settled as well on a few hundred
-/// rows as on all of them, at a fraction of the passes' cost; the clip
-/// levels, the median centre and the last refit see every row.
+/// rows as on all of them, at a fraction of the passes' cost. The bounds
+/// of the first median-centre window come from it too; the clip-level
+/// counts, the median centre's histograms and the last two refits see
+/// every row.
 pub const SUBSAMPLE_ROWS: usize = 256;
 
 /// The subsample stride for `rows` rows ([`SUBSAMPLE_ROWS`]).
