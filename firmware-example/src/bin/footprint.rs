@@ -226,6 +226,25 @@ fn stack_self_check() -> bool {
     ok
 }
 
+/// Prints `STACK <method><suffix> n=<n> bytes=<b>` for every method on
+/// `samples`; false when a calibration failed.
+fn stack_lines(samples: &[[i16; 3]], suffix: &str) -> bool {
+    let mut ok = true;
+    for method in Method::ALL {
+        match stack_of(samples, method) {
+            Some(bytes) => println!(
+                "STACK {=str}{=str} n={=usize} bytes={=usize}",
+                method.name(),
+                suffix,
+                samples.len(),
+                bytes
+            ),
+            None => ok = false,
+        }
+    }
+    ok
+}
+
 fn stack_run() -> ! {
     use firmware_example::sim::{Scenario, Simulator};
 
@@ -246,18 +265,7 @@ fn stack_run() -> ! {
     }
     let samples = store.as_slice();
 
-    let mut ok = true;
-    for method in Method::ALL {
-        match stack_of(samples, method) {
-            Some(bytes) => println!(
-                "STACK {=str} n={=usize} bytes={=usize}",
-                method.name(),
-                samples.len(),
-                bytes
-            ),
-            None => ok = false,
-        }
-    }
+    let mut ok = stack_lines(samples, "");
     // The same samples with every tenth row displaced by about 0.3 of the
     // field (55 counts on each axis: 95 of 320) and every 50th row zero:
     // the plain attempt with the glitch rules, then the robust path
@@ -271,17 +279,7 @@ fn stack_run() -> ! {
             _ => *s,
         };
     }
-    for method in Method::ALL {
-        match stack_of(&dirty[..samples.len()], method) {
-            Some(bytes) => println!(
-                "STACK {=str}-contaminated n={=usize} bytes={=usize}",
-                method.name(),
-                samples.len(),
-                bytes
-            ),
-            None => ok = false,
-        }
-    }
+    ok &= stack_lines(&dirty[..samples.len()], "-contaminated");
     println!(
         "RAM sample_bytes={=usize} store_bytes={=usize} store_capacity={=usize}",
         core::mem::size_of::<[i16; 3]>(),
