@@ -356,8 +356,35 @@ fn plain_path<T: Real, S: Sample>(
     step: methods::Step<T, S>,
     clean: &mut bool,
 ) -> Result<Fit<T>, Error> {
-    let norm = scan.norm;
     let mut figures = Figures::new(scan, config, false);
+    let start = plain_start(samples, config, scan, ls_solve, &mut figures)?;
+    let est = method_step(samples, config, &start, step, &figures)?;
+    let done = finish(samples, config, &start, &est, &mut figures)?;
+    let fit = done.fit;
+    let sigma = fit.report.quality.fit_error;
+    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+    // Heavy tails: a contamination that broadened every residual, so that
+    // none stands out.
+    let is_clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
+        && clean_limit(done.final_max, sigma)
+        && !done.heavy_tails
+        && !done.misfit;
+    *clean = is_clean;
+    Ok(fit)
+}
+
+/// The plain path up to the method: the moments and the LS fit, and the
+/// figures they give (into `figures`). Out of line, as [`robust_start`]:
+/// the moments take stack only until the method starts.
+#[inline(never)]
+fn plain_start<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    figures: &mut Figures<T>,
+) -> Result<Start<T>, Error> {
+    let norm = scan.norm;
     // The rows the rules dropped stay out; without drops the scan's rules
     // are plain, and so are the loops.
     let gate = rules::Gate {
@@ -373,7 +400,7 @@ fn plain_path<T: Real, S: Sample>(
     let (ls, gap) = match ls_step(&moments, ls_solve) {
         (Ok(ls), gap) => (ls, gap),
         // A failed fit of planar data is refused as planar.
-        (Err(e), _) => return Err(judge_failure(&figures, config, e)),
+        (Err(e), _) => return Err(judge_failure(figures, config, e)),
     };
     figures.quadric_gap = gap;
     let start = Start {
@@ -382,22 +409,7 @@ fn plain_path<T: Real, S: Sample>(
         weights: methods::Weights { gate, sigma: None },
         robust_passes: 0,
     };
-    let est = method_step(samples, config, &start, step, &figures)?;
-    let done = finish(samples, config, &start, &est, &mut figures)?;
-    let fit = done.fit;
-    let sigma = fit.report.quality.fit_error;
-    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
-    // Residuals with heavier tails than noise (their RMS well above their
-    // robust sigma) are a contamination that broadened every residual, so
-    // that none stands out. Not at the level of rounding (below
-    // sqrt(eps) of the field), where the tails are the rounding's own.
-    let rms = fit.report.radial_rms;
-    let is_clean = done.method_max.is_none_or(|(m, s)| clean_limit(m, s))
-        && clean_limit(done.final_max, sigma)
-        && !(rms > sigma * T::lit(CLEAN_TAIL) && rms > T::EPSILON.sqrt())
-        && !done.misfit;
-    *clean = is_clean;
-    Ok(fit)
+    Ok(start)
 }
 
 /// The robust pipeline (section 14 of the design document): screening, the
@@ -470,6 +482,11 @@ struct Finished<T: Real> {
     final_max: T,
     /// The lack of fit is beyond its limit (`Figures::misfit`).
     misfit: bool,
+    /// The radial residuals have heavier tails than noise: their RMS is
+    /// above [`CLEAN_TAIL`] robust sigmas, and above the level of
+    /// rounding (`sqrt(eps)` of the field), where the tails are the
+    /// rounding's own.
+    heavy_tails: bool,
 }
 
 /// The method from the start; a failure is judged on the figures so far.
@@ -581,6 +598,8 @@ fn finish<T: Real, S: Sample>(
         method_max: est.max_residual.zip(est.sigma),
         final_max: last.max_residual,
         misfit: figures.misfit(&config.thresholds),
+        heavy_tails: last.radial_rms > last.fit_error * T::lit(CLEAN_TAIL)
+            && last.radial_rms * last.radial_rms > T::EPSILON,
     })
 }
 
