@@ -105,6 +105,10 @@ pub(crate) struct Weights<T: Real> {
     /// Robust standard deviation of the radial residuals under the start
     /// (from the previous pass: the weights lag one pass).
     pub sigma: Option<T>,
+    /// A plain pass whose residuals' kurtosis exceeds this ends the method
+    /// with an error (the robust path follows; see
+    /// [`crate::CLEAN_KURTOSIS`]).
+    pub kurtosis_limit: Option<T>,
 }
 
 impl<T: Real> Weights<T> {
@@ -112,6 +116,7 @@ impl<T: Real> Weights<T> {
     pub(crate) const PLAIN: Self = Self {
         gate: Gate::PLAIN,
         sigma: None,
+        kurtosis_limit: None,
     };
 
     /// The residual limit, [`OUTLIER_CUT`] robust standard deviations.
@@ -124,6 +129,7 @@ impl<T: Real> Weights<T> {
         Self {
             gate: self.gate,
             sigma,
+            kurtosis_limit: self.kurtosis_limit,
         }
     }
 }
@@ -146,7 +152,11 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
     weights: &Weights<T>,
 ) -> Result<(Stats<T>, Option<T>, T), Error> {
     if weights.gate.is_plain() && weights.sigma.is_none() {
-        let stats = Stats::accumulate(samples, norm, centre, w)?;
+        let (stats, kurtosis) = Stats::accumulate_plain(samples, norm, centre, w)?;
+        if weights.kurtosis_limit.is_some_and(|limit| kurtosis > limit) {
+            // Heavy tails: this plain fit will not be taken.
+            return Err(Error::OutOfRange);
+        }
         return Ok((stats, None, T::zero()));
     }
     measured_stats(samples, norm, centre, w, weights)
