@@ -8,3 +8,9 @@ pub mod scenarios;
 pub mod sim;
 pub mod study;
 pub mod target_vectors;
+
+/// The repository README's example runs as a doctest here (the core's
+/// doctests cover its own crate README, which ships with it).
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+struct RepositoryReadmeDoctests;

@@ -140,9 +140,9 @@ pub mod screen;
 #[cfg(test)]
 mod test_rng;
 
-/// The README's example runs as a doctest.
+/// The crate README's example runs as a doctest.
 #[cfg(doctest)]
-#[doc = include_str!("../../README.md")]
+#[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
 
 pub use calibration::Calibration;

@@ -6,7 +6,8 @@
 //! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
-//! | `test` | setup, then every test: host tests, the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
+//! | `test` | setup, then every test: host tests, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
+//! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //!
 //! Each step prints what it runs; the first failing step ends the run with
@@ -26,9 +27,10 @@ fn main() {
         Some("qemu") => setup().and_then(|()| qemu_demo()),
         Some("qemu-faults") => setup().and_then(|()| qemu_faults()),
         Some("test") => setup().and_then(|()| test_all()),
+        Some("package") => package_check(),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|bench [--verify] [--host]>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|bench [--verify] [--host]>");
             exit(2);
         }
     };
@@ -51,6 +53,16 @@ fn firmware_dir() -> PathBuf {
 
 /// Runs a command in `dir`, failing with its description on a non-zero exit.
 fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
+    run_with(dir, program, args, &[])
+}
+
+/// [`run`] with environment variables set for the command.
+fn run_with(
+    dir: &Path,
+    program: &str,
+    args: &[&str],
+    envs: &[(&str, &str)],
+) -> Result<(), String> {
     println!("\n==> ({}) {program} {}", dir.display(), args.join(" "));
     let status = Command::new(program)
         .args(args)
@@ -59,6 +71,7 @@ fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
         // per-invocation settings into it.
         .env_remove("CARGO_TARGET_DIR")
         .env_remove("CARGO_BUILD_TARGET")
+        .envs(envs.iter().copied())
         .status()
         .map_err(|e| format!("cannot start {program}: {e}"))?;
     if status.success() {
@@ -170,6 +183,7 @@ fn qemu_faults() -> Result<(), String> {
 /// the fault run.
 fn test_all() -> Result<(), String> {
     run(&root(), "cargo", &["test", "--workspace", "--locked"])?;
+    package_check()?;
     run_on_qemu("ontarget")?;
     let fw = firmware_dir();
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
@@ -180,6 +194,60 @@ fn test_all() -> Result<(), String> {
     let proof = root().join("no-panic-check").join("check.sh");
     let proof = proof.to_str().ok_or("check.sh: path is not UTF-8")?;
     run(&root(), "bash", &[proof, "--no-list"])
+}
+
+/// The value of the first `key = "value"` line after the line `section` of
+/// the TOML file `path` (enough for this repository's manifests).
+fn toml_value(path: &Path, section: &str, key: &str) -> Result<String, String> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let prefix = format!("{key} = \"");
+    text.lines()
+        .skip_while(|l| l.trim() != section)
+        .find_map(|l| l.trim().strip_prefix(prefix.as_str())?.strip_suffix('"'))
+        .map(str::to_owned)
+        .ok_or_else(|| format!("{}: no {key} in {section}", path.display()))
+}
+
+/// The core as a user gets it from the registry: `cargo package` (which
+/// also builds the packaged crate), then the crate's own tests, doctests
+/// included, in a copy extracted outside this workspace (so nothing of the
+/// repository is in reach), with the lock file the package carries and
+/// the pinned toolchain.
+fn package_check() -> Result<(), String> {
+    let root = root();
+    run(
+        &root,
+        "cargo",
+        &["package", "-p", "mag-cal-core", "--locked", "--allow-dirty"],
+    )?;
+    let version = toml_value(&root.join("Cargo.toml"), "[workspace.package]", "version")?;
+    let toolchain = toml_value(&root.join("rust-toolchain.toml"), "[toolchain]", "channel")?;
+    let name = format!("mag-cal-core-{version}");
+    let archive = root.join("target").join("package").join(format!("{name}.crate"));
+    let dir = std::env::temp_dir().join("mag-cal-package-check");
+    // A stale copy from an earlier run must not be tested.
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let (archive, extract) = (path_str(&archive)?, path_str(&dir)?);
+    run(&root, "tar", &["-xzf", archive, "-C", extract])?;
+    let target = root.join("target").join("package-check");
+    run_with(
+        &dir.join(&name),
+        "cargo",
+        &["test", "--locked"],
+        &[
+            ("RUSTUP_TOOLCHAIN", toolchain.as_str()),
+            ("CARGO_TARGET_DIR", path_str(&target)?),
+        ],
+    )
+}
+
+fn path_str(p: &Path) -> Result<&str, String> {
+    p.to_str()
+        .ok_or_else(|| format!("{}: path is not UTF-8", p.display()))
 }
 
 /// The benchmarks: instruction counts and footprint on the emulated
