@@ -462,7 +462,7 @@ impl Reference<'_> {
                 Some((libm::fabsf(r / radius - 1.0), RAW_THRESHOLD))
             }
             Reference::Calibrated(cal) => {
-                Some((libm::fabsf(cal.apply(y).norm() - 1.0), CAL_THRESHOLD))
+                Some((libm::fabsf(crate::norm(cal.apply(y)) - 1.0), CAL_THRESHOLD))
             }
         }
     }

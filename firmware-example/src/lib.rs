@@ -52,7 +52,12 @@ use defmt_semihosting as _;
 #[cfg(feature = "qemu")]
 pub use sim_sensor as platform;
 
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector3};
+
+/// The length of a calibrated reading (the core's API gives plain arrays).
+pub fn norm(v: [f32; 3]) -> f32 {
+    libm::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+}
 
 /// The true calibration of a simulated sensor: `y = T h + b` in counts.
 pub struct Truth {

@@ -83,8 +83,8 @@ use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
 use mag_cal_core::collector::{Collector, Offer, CELLS};
 use mag_cal_core::heading::{heading_deg, wrap_deg, HeadingSmoother, DEFAULT_WINDOW};
-use mag_cal_core::nalgebra::Vector3;
 use mag_cal_core::{calibrate, Calibration, Config, Fit, SampleClass};
+use nalgebra::{Matrix3, Vector3};
 
 use firmware_example::faults::{
     raw_reference, retry, FaultLog, GlitchLog, Monitor, Reference, Release, Retry, GUARD,
@@ -92,7 +92,7 @@ use firmware_example::faults::{
 };
 use firmware_example::heading::wrap_360;
 use firmware_example::storage::{self, RECORD_LEN};
-use firmware_example::{platform, BootOutcome, GlitchKind, Truth};
+use firmware_example::{norm, platform, BootOutcome, GlitchKind, Truth};
 
 /// Capacity of the collector: 600 samples of 6 bytes (3.6 kB).
 const CAPACITY: usize = 600;
@@ -384,9 +384,9 @@ fn run_boot<I: I2c, D: DelayNs>(
             info!(
                 "loaded the stored calibration from {=str}: b = [{=f32}, {=f32}, {=f32}], rho = {=f32} counts; skipping the calibration",
                 platform::STORAGE_NAME,
-                b.x,
-                b.y,
-                b.z,
+                b[0],
+                b[1],
+                b[2],
                 cal.field_strength()
             );
             (BootOutcome::Loaded, cal)
@@ -677,7 +677,7 @@ fn classify_samples(
     let (mut worst_used, mut worst_all, mut worst_glitch_used) = (0.0f32, 0.0f32, 0.0f32);
     let classes = fit.report.selection.classify(cal, samples);
     for (k, (s, class)) in samples.iter().zip(classes).enumerate() {
-        let r = libm::fabsf(cal.apply(s.map(f32::from)).norm() - 1.0);
+        let r = libm::fabsf(norm(cal.apply(*s)) - 1.0);
         worst_all = worst_all.max(r);
         if class == SampleClass::Used {
             worst_used = worst_used.max(r);
@@ -740,14 +740,11 @@ fn log_fit(fit: &Fit<f32>) {
         "calibration (ADC2, f32): {} iterations, {} samples used, {} dropped, radial RMS {=f32}",
         r.iterations, r.samples_used, r.samples_dropped, r.radial_rms
     );
-    info!("  b   = [{=f32}, {=f32}, {=f32}] counts", b.x, b.y, b.z);
-    for i in 0..3 {
+    info!("  b   = [{=f32}, {=f32}, {=f32}] counts", b[0], b[1], b[2]);
+    for (i, row) in w.iter().enumerate() {
         info!(
             "  W[{}] = [{=f32}, {=f32}, {=f32}] 1/counts",
-            i,
-            w[(i, 0)],
-            w[(i, 1)],
-            w[(i, 2)]
+            i, row[0], row[1], row[2]
         );
     }
     info!(
@@ -832,9 +829,9 @@ fn stream_headings<I: I2c, D: DelayNs>(
                 dev.log.leaked += 1;
             }
             let raw = raw.map(f32::from);
-            smoothed.push(heading_deg(&cal.apply(raw)));
+            smoothed.push(heading_deg(cal.apply(raw)));
             // The same reading without calibration, for contrast.
-            smoothed_raw.push(heading_deg(&Vector3::from(raw)));
+            smoothed_raw.push(heading_deg(raw));
             if let Some(t) = meta.true_heading {
                 smoothed_truth.push(t);
             }
@@ -987,10 +984,12 @@ fn check_glitches(log: &GlitchLog, injected: [u32; 2]) -> bool {
 ///   The true canonical form is obtained from the core itself, as the
 ///   canonical `W` of the calibration `(b, T^-1)`.
 fn parameter_errors(cal: &Calibration<f32>, truth: &Truth) -> Option<(f32, f32)> {
-    let e_b = (cal.hard_iron() - truth.hard_iron).norm() / truth.field_strength;
-    let w_true = Calibration::new(truth.hard_iron, truth.soft_iron.try_inverse()?).ok()?;
-    let t_hat = cal.soft_iron().try_inverse()?;
-    let t_true = w_true.soft_iron().try_inverse()?;
+    let e_b = (Vector3::from(cal.hard_iron()) - truth.hard_iron).norm() / truth.field_strength;
+    // W by rows; the canonical W is symmetric, so rows and columns agree.
+    let w_inv = truth.soft_iron.try_inverse()?.transpose();
+    let w_true = Calibration::new(truth.hard_iron.into(), w_inv.into()).ok()?;
+    let t_hat = Matrix3::from(cal.soft_iron()).try_inverse()?;
+    let t_true = Matrix3::from(w_true.soft_iron()).try_inverse()?;
     let e_s = (t_hat - t_true).norm() / truth.field_strength;
     Some((e_b, e_s))
 }

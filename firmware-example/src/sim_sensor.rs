@@ -79,7 +79,7 @@ use embedded_hal::i2c::{self, ErrorKind, NoAcknowledgeSource, Operation};
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 use crate::sim::{Faults, Glitch, InjectedCounts, Motion, Reading, Scenario, Simulator};
 use crate::storage::FlashStorage;

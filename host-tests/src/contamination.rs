@@ -870,8 +870,8 @@ pub struct Accepted {
 impl Accepted {
     fn from_fit<T: Real>(fit: &Fit<T>) -> Self {
         Accepted {
-            b: fit.calibration.hard_iron().map(Real::to_f64),
-            w: fit.calibration.soft_iron().map(Real::to_f64),
+            b: fit.calibration.hard_iron_vector().map(Real::to_f64),
+            w: fit.calibration.soft_iron_matrix().map(Real::to_f64),
             warnings: fit.report.warnings,
         }
     }

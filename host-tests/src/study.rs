@@ -9,8 +9,8 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, Config, Fit, Method};
+use nalgebra::{Matrix3, Vector3};
 
 use crate::metrics::{self, Errors, Estimate};
 use crate::scenarios::{HeadingScenario, Scenario, Truth};
@@ -41,8 +41,8 @@ pub fn config(method: Method) -> Config {
 /// The calibration as the metrics see it.
 pub fn estimate(fit: &Fit<f64>) -> Estimate {
     Estimate {
-        b: fit.calibration.hard_iron(),
-        w: fit.calibration.soft_iron(),
+        b: fit.calibration.hard_iron_vector(),
+        w: fit.calibration.soft_iron_matrix(),
     }
 }
 
@@ -448,7 +448,8 @@ mod core_align {
     pub fn procrustes(u: &[Vector3<f64>], h: &[Vector3<f64>]) -> Matrix3<f64> {
         let u: Vec<[f64; 3]> = u.iter().map(|v| [v.x, v.y, v.z]).collect();
         let h: Vec<[f64; 3]> = h.iter().map(|v| [v.x, v.y, v.z]).collect();
-        mag_cal_core::align::procrustes(&u, &h).expect("alignment of a full recording")
+        let q = mag_cal_core::align::procrustes(&u, &h).expect("alignment of a full recording");
+        Matrix3::from_row_slice(q.as_flattened())
     }
 }
 
@@ -459,7 +460,7 @@ mod core_heading {
 
     /// `atan2(-v_y, v_x)` in degrees.
     pub fn heading_deg(v: &Vector3<f64>) -> f64 {
-        mag_cal_core::heading::heading_deg(v)
+        mag_cal_core::heading::heading_deg((*v).into())
     }
 
     /// The smoother's outputs once its window is full (`len - w + 1`).

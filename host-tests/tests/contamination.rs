@@ -15,8 +15,8 @@ use host_tests::contamination::{
 };
 use host_tests::reference::{adc2, RefLs};
 use host_tests::sim::Rng;
-use mag_cal_core::nalgebra::Vector3;
 use mag_cal_core::Config;
+use nalgebra::Vector3;
 
 /// Every setting of the study's grid.
 fn settings() -> Vec<Setting> {

@@ -4,8 +4,8 @@
 
 use host_tests::real::read_xyz;
 use host_tests::sim::{make_samples_axes, scenario_t, sphere, Rng};
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, Config, Error, Method, Thresholds, Warning};
+use nalgebra::{Matrix3, Vector3};
 
 const B: [f64; 3] = [0.05, 0.075, 0.10];
 

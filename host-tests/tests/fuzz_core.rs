@@ -58,11 +58,11 @@ use host_tests::sim;
 use mag_cal_core::align::{procrustes, AlignedCalibration};
 use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, wrap_deg, HeadingSmoother};
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{
     calibrate, persist, Calibration, Config, Error, Fit, LsVariant, Method, Real, Sample,
     SampleStore, Thresholds, MIN_SAMPLES,
 };
+use nalgebra::{Matrix3, Vector3};
 
 const DEFAULT_SEED: u64 = 0x6d61_6763_616c_0001;
 
@@ -582,10 +582,10 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
             let c = fit.calibration;
             let r = fit.report;
             let what = || format!("{method:?}/{ls:?}: {fit:?}");
-            if !c.hard_iron().iter().all(|v| v.is_finite()) {
+            if !c.hard_iron_vector().iter().all(|v| v.is_finite()) {
                 return Err(format!("non-finite hard iron: {}", what()));
             }
-            if !c.soft_iron().iter().all(|v| v.is_finite()) {
+            if !c.soft_iron_matrix().iter().all(|v| v.is_finite()) {
                 return Err(format!("non-finite soft iron: {}", what()));
             }
             let rho = c.field_strength();
@@ -595,7 +595,7 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
             // rho = det(W)^(-1/3), recomputed in f64 from the W returned,
             // on W scaled to a largest entry of 1 (det(W) itself can
             // underflow even in f64, e.g. W ~ 1e-131).
-            let w64 = c.soft_iron().map(Real::to_f64);
+            let w64 = c.soft_iron_matrix().map(Real::to_f64);
             let s64 = w64.amax();
             let rho64 = 1.0 / (s64 * (w64 / s64).determinant().cbrt());
             let rel = (rho.to_f64() - rho64).abs() / rho64;
@@ -722,6 +722,11 @@ fn calibrate_case(seed: u64, index: u64) -> Result<u64, String> {
     }
 }
 
+/// The rows of `m` (the API's matrices are by rows).
+fn rows<T: Real>(m: &Matrix3<T>) -> [[T; 3]; 3] {
+    m.transpose().into()
+}
+
 /// `a` within `tol` of a rotation: `|R^T R - I| <= tol`, `det R > 0`.
 fn is_rotation<T: Real>(r: &Matrix3<T>, tol: f64) -> bool {
     let defect = (r.transpose() * r - Matrix3::identity()).amax();
@@ -748,21 +753,29 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
             }),
             _ => Matrix3::from_fn(|_, _| t(rng.range(-2.0, 2.0))),
         };
-    let raw = rng.any_vec3().map(t);
-    if let Ok(cal) = Calibration::new(b, w) {
+    // Raw readings as the API takes them: f64 arrays (any value, as in the
+    // working precision after conversion) and i16 tuples.
+    let raw = rng.any_vec3().map(|x| t(x).to_f64());
+    let counts = (
+        rng.next_u64() as i16,
+        rng.next_u64() as i16,
+        rng.next_u64() as i16,
+    );
+    if let Ok(cal) = Calibration::new(b.into(), rows(&w)) {
         let rho = cal.field_strength();
         if !(rho > T::zero() && rho.is_finite()) {
             return Err(format!("Calibration::new: bad field strength {cal:?}"));
         }
         if !cal
-            .hard_iron()
+            .hard_iron_vector()
             .iter()
-            .chain(cal.soft_iron().iter())
+            .chain(cal.soft_iron_matrix().iter())
             .all(|v| v.is_finite())
         {
             return Err(format!("Calibration::new: non-finite parameters {cal:?}"));
         }
         let _ = cal.apply(raw);
+        let _ = cal.apply(counts);
         let _ = cal.apply_scaled(raw);
         let _ = cal.shape();
         // A rotation, a nearly-rotation, or garbage.
@@ -785,9 +798,9 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
             }
             _ => Matrix3::from_fn(|i, j| t(if i == j { 1.0 } else { 0.0 } + rng.normal() * 1e-6)),
         };
-        if let Ok(aligned) = AlignedCalibration::new(cal, r) {
+        if let Ok(aligned) = AlignedCalibration::new(cal, rows(&r)) {
             let _ = aligned.apply(raw);
-            if !is_rotation(&aligned.rotation(), tol * 2.0) {
+            if !is_rotation(&aligned.rotation_matrix(), tol * 2.0) {
                 return Err(format!("AlignedCalibration accepted a non-rotation {r:?}"));
             }
         }
@@ -815,6 +828,7 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
         .collect();
     for (a, b) in [(&u, &h), (&dirs, &dirs), (&u, &u)] {
         if let Ok(q) = procrustes::<T>(a, b) {
+            let q = Matrix3::from_row_slice(q.as_flattened());
             if !q.iter().all(|x| x.is_finite()) || !is_rotation(&q, tol) {
                 return Err(format!("procrustes: not a rotation {q:?}"));
             }
@@ -824,11 +838,11 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
     // Headings.
     let f = vec3(rng);
     let a = vec3(rng);
-    let hd = heading_deg(&f);
+    let hd = heading_deg(f.into());
     if !in_heading_range(hd) {
         return Err(format!("heading_deg({f:?}) = {hd:?}"));
     }
-    if let Some(h) = tilt_compensated_heading_deg(&f, &a) {
+    if let Some(h) = tilt_compensated_heading_deg(f.into(), a.into()) {
         if !in_heading_range(h) {
             return Err(format!(
                 "tilt_compensated_heading_deg({f:?}, {a:?}) = {h:?}"
@@ -895,8 +909,10 @@ fn others_case(seed: u64, index: u64) -> Result<u64, String> {
     // SampleStore beyond its capacity.
     let mut store: SampleStore<[i16; 3], 8> = SampleStore::new();
     for i in 0..rng.below(12) {
-        let r = store.push([i as i16, 0, rng.next_u64() as i16]);
-        if (i < 8) != r.is_ok() || (r.is_err() && r != Err(Error::CapacityExceeded)) {
+        let sample = [i as i16, 0, rng.next_u64() as i16];
+        let r = store.push(sample);
+        // A full store hands the sample back.
+        if (i < 8) != r.is_ok() || (r.is_err() && r != Err(sample)) {
             return Err(format!("SampleStore push {i}: {r:?}"));
         }
     }
@@ -974,14 +990,14 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
             0.0
         }
     });
-    let mut record: Vec<u8> = match Calibration::<f64>::new(b, w) {
+    let mut record: Vec<u8> = match Calibration::<f64>::from_nalgebra(b, w) {
         Ok(cal) => {
             let bytes = persist::to_bytes(&cal);
             let back = persist::from_bytes::<f64>(&bytes);
             if back != Ok(cal) {
                 return Err(format!("f64 round trip: {cal:?} -> {back:?}"));
             }
-            if let Ok(c32) = Calibration::<f32>::new(b.cast(), w.cast()) {
+            if let Ok(c32) = Calibration::<f32>::from_nalgebra(b.cast(), w.cast()) {
                 let back = persist::from_bytes::<f32>(&persist::to_bytes(&c32));
                 if back != Ok(c32) {
                     return Err(format!("f32 round trip: {c32:?} -> {back:?}"));
@@ -1056,8 +1072,8 @@ trait CastF64 {
 impl<T: Real> CastF64 for Calibration<T> {
     fn cast_f64(&self) -> (Vector3<f64>, Matrix3<f64>, f64) {
         (
-            self.hard_iron().map(Real::to_f64),
-            self.soft_iron().map(Real::to_f64),
+            self.hard_iron_vector().map(Real::to_f64),
+            self.soft_iron_matrix().map(Real::to_f64),
             self.field_strength().to_f64(),
         )
     }

@@ -67,8 +67,8 @@ fn check<T: Real>(y: &[[f64; 3]]) -> Result<(), TestCaseError> {
             };
             if let Ok(fit) = calibrate::<T, _>(y, &cfg) {
                 let c = fit.calibration;
-                prop_assert!(c.hard_iron().iter().all(|v| v.is_finite()));
-                prop_assert!(c.soft_iron().iter().all(|v| v.is_finite()));
+                prop_assert!(c.hard_iron_vector().iter().all(|v| v.is_finite()));
+                prop_assert!(c.soft_iron_matrix().iter().all(|v| v.is_finite()));
                 prop_assert!(c.field_strength() > T::zero() && c.field_strength().is_finite());
                 prop_assert_eq!(
                     fit.report.samples_used

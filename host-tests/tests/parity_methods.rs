@@ -20,10 +20,10 @@ use host_tests::sim::scenario_samples as scenario;
 
 /// max|dM| / max|M| and |db| / rho.
 fn deviation(core: &Fit<f64>, want: &RefFit) -> (f64, f64) {
-    let m = core.calibration.shape();
+    let m = core.calibration.shape_matrix();
     (
         (m - want.m).amax() / want.m.amax(),
-        (core.calibration.hard_iron() - want.b).norm() / want.rho,
+        (core.calibration.hard_iron_vector() - want.b).norm() / want.rho,
     )
 }
 
@@ -153,8 +153,10 @@ fn f32_methods_agree_with_f64() {
         let cfg = Config { method, ..PLAIN };
         let a = calibrate::<f64, _>(&y64, &cfg).unwrap().calibration;
         let b = calibrate::<f32, _>(&y32, &cfg).unwrap().calibration;
-        let dm = (b.shape().map(f64::from) - a.shape()).amax() / a.shape().amax();
-        let db = (b.hard_iron().map(f64::from) - a.hard_iron()).norm() / a.field_strength();
+        let dm =
+            (b.shape_matrix().map(f64::from) - a.shape_matrix()).amax() / a.shape_matrix().amax();
+        let db = (b.hard_iron_vector().map(f64::from) - a.hard_iron_vector()).norm()
+            / a.field_strength();
         println!("{method:?} f32 vs f64: dM {dm:.1e} db {db:.1e}");
         assert!(dm < 1e-4 && db < 1e-4, "{method:?}: {dm:e} {db:e}");
     }

@@ -3,9 +3,9 @@
 //! each variant; ADC1, ADC2, iterated ADC2 and subMLE from LS9).
 
 use host_tests::sim::{make_samples_axes, sphere, Rng};
-use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
 use mag_cal_core::quality::{REFUSE_DISTORTION, REFUSE_FLATNESS};
 use mag_cal_core::{calibrate, Calibration, Config, Error, Fit, LsVariant, Method};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use proptest::prelude::*;
 
 /// A random distortion `T = U diag(s) V^T`, singular values in 0.5..2.
@@ -129,7 +129,7 @@ fn pair(
 }
 
 fn m_err(fit: &Fit<f64>, m: &Matrix3<f64>) -> f64 {
-    (fit.calibration.shape() - m).amax() / m.amax()
+    (fit.calibration.shape_matrix() - m).amax() / m.amax()
 }
 
 proptest! {
@@ -165,7 +165,7 @@ proptest! {
                 Err(Error::Planar) if sample_flatness(&y) < REFUSE_FLATNESS => continue,
                 f => f.unwrap(),
             };
-            let eb = (fit.calibration.hard_iron() - b).norm() / rho;
+            let eb = (fit.calibration.hard_iron_vector() - b).norm() / rho;
             prop_assert!(m_err(&fit, &m) < 1e-6, "{method:?} {ls:?}: eM {}", m_err(&fit, &m));
             prop_assert!(eb < 1e-6, "{method:?} {ls:?}: eb {eb}");
             prop_assert!((fit.calibration.field_strength() - rho).abs() < 1e-6 * rho);
@@ -184,9 +184,9 @@ proptest! {
             let label = format!("{method:?} {ls:?} robust {robust}");
             let cfg = Config { robust, ..config(method, ls) };
             let Some((a, c)) = pair(&label, &t, calibrate(&y, &cfg), calibrate(&p, &cfg))? else { continue };
-            let dm = (a.shape() - c.shape()).amax() / a.shape().amax();
+            let dm = (a.shape_matrix() - c.shape_matrix()).amax() / a.shape_matrix().amax();
             prop_assert!(dm < tol, "{label}: {dm:e}");
-            prop_assert!((a.hard_iron() - c.hard_iron()).norm() < tol * a.field_strength());
+            prop_assert!((a.hard_iron_vector() - c.hard_iron_vector()).norm() < tol * a.field_strength());
         }
     }
 
@@ -223,9 +223,9 @@ proptest! {
             let tol = if method == Method::SubMle { 1e-4 } else { 1e-9 };
             let label = format!("{method:?} {ls:?}");
             let Some((a, c)) = pair(&label, &t, calibrate(&y, &cfg), calibrate(&qy, &cfg))? else { continue };
-            let want_m = q * a.shape() * q.transpose();
-            prop_assert!((c.shape() - want_m).amax() < tol * want_m.amax(), "{method:?} {ls:?}");
-            prop_assert!((c.hard_iron() - q * a.hard_iron()).norm() < tol * a.field_strength());
+            let want_m = q * a.shape_matrix() * q.transpose();
+            prop_assert!((c.shape_matrix() - want_m).amax() < tol * want_m.amax(), "{method:?} {ls:?}");
+            prop_assert!((c.hard_iron_vector() - q * a.hard_iron_vector()).norm() < tol * a.field_strength());
             prop_assert!((c.field_strength() - a.field_strength()).abs() < tol * a.field_strength());
         }
     }
@@ -241,10 +241,10 @@ proptest! {
             let cfg = Config { robust, ..config(method, ls) };
             let Some((a, c)) = pair(&label, &t, calibrate(&y, &cfg), calibrate(&ky, &cfg))? else { continue };
             let tol = tol * 10.0;
-            let db = (c.hard_iron() - a.hard_iron() * k).norm() / (k * a.field_strength());
+            let db = (c.hard_iron_vector() - a.hard_iron_vector() * k).norm() / (k * a.field_strength());
             prop_assert!(db < tol, "{label}: {db:e}");
             prop_assert!((c.field_strength() - a.field_strength() * k).abs() < tol * k * a.field_strength());
-            prop_assert!((c.shape() * (k * k) - a.shape()).amax() < tol * a.shape().amax());
+            prop_assert!((c.shape_matrix() * (k * k) - a.shape_matrix()).amax() < tol * a.shape_matrix().amax());
         }
     }
 }

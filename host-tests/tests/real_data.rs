@@ -4,12 +4,15 @@
 
 use host_tests::real::read_xyz;
 use host_tests::reference::{self, RefLs};
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, Calibration, Config, LsVariant, Method, SampleClass};
+use nalgebra::{Matrix3, Vector3};
 
 /// std/mean of `|W (y - b)|` over the samples.
 fn norm_spread(samples: &[[f64; 3]], cal: &Calibration<f64>) -> f64 {
-    let norms: Vec<f64> = samples.iter().map(|y| cal.apply(*y).norm()).collect();
+    let norms: Vec<f64> = samples
+        .iter()
+        .map(|y| cal.apply_vector(*y).norm())
+        .collect();
     let n = norms.len() as f64;
     let mean = norms.iter().sum::<f64>() / n;
     let var = norms.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n;
@@ -50,15 +53,17 @@ fn fit_all(name: &str) -> Calibration<f64> {
         assert!((s_adc2 / s_ls - 1.0).abs() < 0.01, "{name} {ls:?}");
         let want = reference::adc2(&y, rls).unwrap();
         let c = adc2.calibration;
-        assert!((c.shape() - want.m).amax() < 1e-9 * want.m.amax());
-        assert!((c.hard_iron() - want.b).norm() < 1e-9 * want.rho);
+        assert!((c.shape_matrix() - want.m).amax() < 1e-9 * want.m.amax());
+        assert!((c.hard_iron_vector() - want.b).norm() < 1e-9 * want.rho);
         // f32 on the same recording agrees with f64 (counts up to 1e4 here).
         let y32: Vec<[f32; 3]> = y.iter().map(|v| v.map(|x| x as f32)).collect();
         let c32 = calibrate::<f32, _>(&y32, &cfg(Method::Adc2))
             .unwrap()
             .calibration;
-        let db = (c32.hard_iron().map(f64::from) - c.hard_iron()).norm() / c.field_strength();
-        let dm = (c32.shape().map(f64::from) - c.shape()).amax() / c.shape().amax();
+        let db = (c32.hard_iron_vector().map(f64::from) - c.hard_iron_vector()).norm()
+            / c.field_strength();
+        let dm =
+            (c32.shape_matrix().map(f64::from) - c.shape_matrix()).amax() / c.shape_matrix().amax();
         assert!(db < 1e-4 && dm < 1e-4, "{name} {ls:?} f32: {db:e} {dm:e}");
     }
     robust_as_good(name, &y)
@@ -92,7 +97,7 @@ fn robust_as_good(name: &str, y: &[[f64; 3]]) -> Calibration<f64> {
         norm_spread(y, &p.calibration),
         norm_spread(&used, &r.calibration),
     );
-    let db = (r.calibration.hard_iron() - p.calibration.hard_iron()).norm()
+    let db = (r.calibration.hard_iron_vector() - p.calibration.hard_iron_vector()).norm()
         / p.calibration.field_strength();
     println!(
         "{name} robust: used {} dropped {:?} screened {} rejected {} fit error {:.4} lack of fit {:.2} \
@@ -126,7 +131,7 @@ fn icm20948_agrees_with_magneto() {
     let magneto_ainv: Matrix3<f64> = Matrix3::new(
         1.12823, -0.01142, 0.00980, -0.01142, 1.09539, 0.00927, 0.00980, 0.00927, 1.10625,
     );
-    let b = cal.hard_iron();
+    let b = cal.hard_iron_vector();
     let db = (b - magneto_b).norm();
     println!("icm20948: b = {b:.2?}, Magneto b = {magneto_b:.2?}, |db| = {db:.2} counts");
     // Observed 0.17 counts of a 370-count field; Magneto dropped 10 samples,
@@ -134,7 +139,7 @@ fn icm20948_agrees_with_magneto() {
     assert!(db < 0.005 * cal.field_strength(), "|db| = {db}");
     // Magneto scales its Ainv to the mean norm Hm = 369.4; compare shapes
     // up to that scale: W / |W| against Ainv / |Ainv|.
-    let w: Matrix3<f64> = cal.soft_iron();
+    let w: Matrix3<f64> = cal.soft_iron_matrix();
     let dw = (w / w.norm() - magneto_ainv / magneto_ainv.norm()).amax();
     println!("icm20948: normalised soft-iron difference to Magneto {dw:.4}");
     assert!(dw < 0.005, "{dw}"); // observed 0.001
@@ -145,10 +150,10 @@ fn mag3_large_offset() {
     let cal = fit_all("mag3_raw_541.csv");
     // That repository's own Python fit (mag3_raw_541.out.txt).
     let theirs = Vector3::new(9955.151669, -7948.26463057, 8511.80447932);
-    let db = (cal.hard_iron() - theirs).norm() / cal.field_strength();
+    let db = (cal.hard_iron_vector() - theirs).norm() / cal.field_strength();
     println!(
         "mag3: b = {:.1?}, theirs {theirs:.1?}, |db|/rho = {db:.4}",
-        cal.hard_iron()
+        cal.hard_iron_vector()
     );
     assert!(db < 0.002, "{db}"); // observed 2e-4
 }

@@ -38,7 +38,7 @@ fn clean_scenarios_are_never_refused_and_as_accurate() {
                     let fit = calibrate::<f64, _>(&r.samples, cfg)
                         .unwrap_or_else(|e| panic!("{method:?} {} run {run}: {e}", s.id));
                     let c = fit.calibration;
-                    let e = fit_errors(&c.hard_iron(), &c.soft_iron(), &truth);
+                    let e = fit_errors(&c.hard_iron_vector(), &c.soft_iron_matrix(), &truth);
                     [e.e_m, e.e_b]
                 };
                 for (acc, e) in [(&mut plain, errors(&off)), (&mut robust, errors(&cfg))] {
@@ -209,8 +209,8 @@ fn the_switch_gives_the_plain_fit() {
     }
     let robust = calibrate::<f64, _>(&dirty, &Config::default()).unwrap();
     let e = fit_errors(
-        &robust.calibration.hard_iron(),
-        &robust.calibration.soft_iron(),
+        &robust.calibration.hard_iron_vector(),
+        &robust.calibration.soft_iron_matrix(),
         &truth,
     );
     assert!(!e.wrong(), "{e:?}");
@@ -219,7 +219,7 @@ fn the_switch_gives_the_plain_fit() {
         Err(_) => {}
         Ok(f) => {
             let c = f.calibration;
-            assert!(fit_errors(&c.hard_iron(), &c.soft_iron(), &truth).wrong());
+            assert!(fit_errors(&c.hard_iron_vector(), &c.soft_iron_matrix(), &truth).wrong());
         }
     }
 }

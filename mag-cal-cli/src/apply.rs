@@ -6,8 +6,8 @@
 use std::io::{BufWriter, Write};
 
 use mag_cal_core::heading::{tilt_compensated_heading_deg, HeadingSmoother};
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{Calibration, Real, SampleClass};
+use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
 use crate::cli::{ApplyArgs, Precision, MAX_WINDOW};
@@ -72,7 +72,7 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErro
     write(&mut out, &header)?;
     let mut line = String::new();
     for (row, raw) in table.samples.iter().enumerate() {
-        let u = cal.apply(*raw);
+        let u = cal.apply_vector(*raw);
         let v = if args.scaled {
             u * cal.field_strength()
         } else {
@@ -82,8 +82,7 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErro
         line.push_str(&format!("{},{},{}", number(v.x), number(v.y), number(v.z)));
         if let Some(accel) = &table.accel {
             let f = accel.get(row).copied().unwrap_or([f64::NAN; 3]);
-            let heading =
-                tilt_compensated_heading_deg(&u, &Vector3::from(f)).filter(|h| h.is_finite());
+            let heading = tilt_compensated_heading_deg(u.into(), f).filter(|h| h.is_finite());
             // An undefined heading is not pushed: the smoothed column keeps
             // the mean of the last defined ones.
             let smoothed = match heading {
@@ -162,7 +161,7 @@ impl RowFlags {
     ) -> Result<Vec<SampleClass>, CliError> {
         let b = Vector3::from(self.hard_iron.map(T::lit));
         let w = Matrix3::from_fn(|r, c| T::lit(self.soft_iron[r][c]));
-        let cal = Calibration::new(b, w).map_err(|err| {
+        let cal = Calibration::from_nalgebra(b, w).map_err(|err| {
             CliError::Input(format!(
                 "{}: hard_iron and soft_iron are not a calibration in {}: {err}",
                 one_line(name),
@@ -227,7 +226,7 @@ fn parameters(value: &Value) -> Result<([f64; 3], [[f64; 3]; 3]), String> {
 fn calibration_from_value(value: &Value, name: &str) -> Result<Calibration<f64>, CliError> {
     let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
     let (b, w) = parameters(value).map_err(bad)?;
-    Calibration::new(Vector3::from(b), Matrix3::from_fn(|r, c| w[r][c])).map_err(|err| {
+    Calibration::from_nalgebra(Vector3::from(b), Matrix3::from_fn(|r, c| w[r][c])).map_err(|err| {
         bad(format!(
             "hard_iron and soft_iron are not a calibration: {err}"
         ))
@@ -249,7 +248,10 @@ mod tests {
     #[test]
     fn reads_the_fit_json() {
         let cal = calibration_from_json(CAL.as_bytes(), "c.json").expect("valid");
-        assert_eq!(cal.apply([12.0, 0.0, 0.0]), Vector3::new(1.0, 0.0, 0.0));
+        assert_eq!(
+            cal.apply_vector([12.0, 0.0, 0.0]),
+            Vector3::new(1.0, 0.0, 0.0)
+        );
         assert_eq!(cal.field_strength(), 2.0);
     }
 

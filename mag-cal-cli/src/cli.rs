@@ -387,14 +387,8 @@ mod tests {
         for (value, words) in [
             (mag_cal_core::CLEAN_LIMIT, "beyond {} robust standard"),
             (mag_cal_core::CLEAN_TAIL, "RMS at most {} of them"),
-            (
-                mag_cal_core::screen::SCREEN_RADIUS,
-                "farther than {} median",
-            ),
-            (
-                mag_cal_core::methods::OUTLIER_CUT,
-                "by more than {} robust standard",
-            ),
+            (mag_cal_core::SCREEN_RADIUS, "farther than {} median"),
+            (mag_cal_core::OUTLIER_CUT, "by more than {} robust standard"),
         ] {
             let phrase = words.replace("{}", &value.to_string());
             let help = AFTER_HELP.split_whitespace().collect::<Vec<_>>().join(" ");

@@ -3,8 +3,8 @@
 use std::io::Write;
 use std::time::Instant;
 
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, Calibration, Config, Method, Real, SampleClass};
+use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
 use crate::cli::{FitArgs, Format, NoiseStd, Precision};
@@ -161,7 +161,7 @@ impl Outcome {
     pub fn calibration(&self) -> Result<Calibration<f64>, CliError> {
         let b = Vector3::from(self.hard_iron);
         let w = Matrix3::from_fn(|r, c| self.soft_iron[r][c]);
-        Ok(Calibration::new(b, w)?)
+        Ok(Calibration::from_nalgebra(b, w)?)
     }
 }
 
@@ -196,8 +196,8 @@ fn fit_in<T: Real>(
     let fit = fit?;
 
     let cal = &fit.calibration;
-    let b = cal.hard_iron();
-    let w = cal.soft_iron();
+    let b = cal.hard_iron_vector();
+    let w = cal.soft_iron_matrix();
     let report = &fit.report;
     // What the fit did with each row, in precision `T` as the core decided.
     let classes: Vec<SampleClass> = match &ints {
@@ -209,7 +209,7 @@ fn fit_in<T: Real>(
         .iter()
         .zip(&classes)
         .filter(|(_, c)| **c == SampleClass::Used)
-        .map(|(s, _)| cal.apply(s.map(T::lit)).norm().to_f64());
+        .map(|(s, _)| cal.apply_vector(*s).norm().to_f64());
     Ok(Outcome {
         method: report.method.name(),
         ls: report.ls.name(),

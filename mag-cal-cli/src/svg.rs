@@ -139,7 +139,7 @@ pub fn plot(
     cal: &Calibration<f64>,
     title: &PlotTitle<'_>,
 ) -> String {
-    let (rho, b) = (cal.field_strength(), cal.hard_iron());
+    let (rho, b) = (cal.field_strength(), cal.hard_iron_vector());
     let counts = Counts::of(&classes[..classes.len().min(samples.len())]);
     let counts = Counts {
         dropped: counts.dropped + samples.len().saturating_sub(classes.len()),
@@ -165,7 +165,7 @@ pub fn plot(
     let mut drawn: Vec<Drawn> = used
         .chain(outliers)
         .map(|(i, (y, class))| {
-            let c = cal.apply_scaled(*y);
+            let c = cal.apply_scaled_vector(*y);
             (
                 i,
                 [y[0] - b.x, y[1] - b.y, y[2] - b.z],
@@ -590,7 +590,7 @@ fn tick_label(value: f64, step: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mag_cal_core::nalgebra::{Matrix3, Vector3};
+    use nalgebra::{Matrix3, Vector3};
 
     #[test]
     fn nice_numbers() {
@@ -611,7 +611,7 @@ mod tests {
     #[test]
     fn four_finite_panels() {
         let b = Vector3::new(10.0, -5.0, 2.0);
-        let cal = Calibration::new(b, Matrix3::identity() * 0.02).expect("valid");
+        let cal = Calibration::from_nalgebra(b, Matrix3::identity() * 0.02).expect("valid");
         let mut samples: Vec<[f64; 3]> = (0..50)
             .map(|i| {
                 let a = f64::from(i) * 0.4;

@@ -23,8 +23,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::linalg::{from_rows, rows};
 use crate::moments::BLOCK;
-use crate::{Calibration, Error, Real};
+use crate::{Calibration, Error, Real, Sample};
 
 /// Sweep cap of the Jacobi SVD. A 3x3 converges quadratically, in 2-4
 /// sweeps (each of three plane rotations); 32 is far beyond that.
@@ -60,19 +61,34 @@ const MAX_SWEEPS: u32 = 32;
 /// - [`Error::NoConvergence`] if the Jacobi SVD does not converge (not
 ///   observed: it takes 2-4 of its 32 sweeps).
 ///
+/// The result is by rows: `q[i][j]` in row `i`, column `j`, so that
+/// `h = Q u`.
+///
 /// ```
 /// use mag_cal_core::align::procrustes;
-/// use mag_cal_core::nalgebra::{Rotation3, Vector3};
 ///
-/// let truth = Rotation3::from_euler_angles(0.1, -0.4, 2.0);
+/// // The reference frame is the calibrated one turned a quarter about z.
+/// let turn = |u: [f64; 3]| [-u[1], u[0], u[2]];
 /// let calibrated = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.0, -1.0, 0.0]];
-/// let reference = calibrated.map(|u| (truth * Vector3::from(u)).into());
+/// let reference = calibrated.map(turn);
 /// let q = procrustes::<f64>(&calibrated, &reference)?;
-/// assert!((q - truth.matrix()).amax() < 1e-12);
-/// assert!((q.determinant() - 1.0).abs() < 1e-12);
+/// let want = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+/// for (row, want_row) in q.iter().zip(want) {
+///     for (x, w) in row.iter().zip(want_row) {
+///         assert!((x - w).abs() < 1e-12);
+///     }
+/// }
 /// # Ok::<(), mag_cal_core::Error>(())
 /// ```
 pub fn procrustes<T: Real>(
+    calibrated: &[[T; 3]],
+    reference: &[[T; 3]],
+) -> Result<[[T; 3]; 3], Error> {
+    procrustes_matrix(calibrated, reference).map(|q| rows(&q))
+}
+
+/// [`procrustes`] on the internal types.
+fn procrustes_matrix<T: Real>(
     calibrated: &[[T; 3]],
     reference: &[[T; 3]],
 ) -> Result<Matrix3<T>, Error> {
@@ -334,17 +350,17 @@ fn rotate_columns<T: Real>(p: &mut [T; 3], q: &mut [T; 3], c: T, s: T) {
 ///
 /// ```
 /// use mag_cal_core::align::AlignedCalibration;
-/// use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
 /// use mag_cal_core::Calibration;
 ///
-/// let cal = Calibration::new(Vector3::new(10.0, 0.0, 0.0), Matrix3::identity() * 0.5)?;
-/// // A quarter turn about z: x goes to y.
-/// let r = *Rotation3::from_axis_angle(&Vector3::z_axis(), core::f64::consts::FRAC_PI_2).matrix();
+/// let half = [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]];
+/// let cal = Calibration::<f64>::new([10.0, 0.0, 0.0], half)?;
+/// // A quarter turn about z, by rows: x goes to y.
+/// let r = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
 /// let aligned = AlignedCalibration::new(cal, r)?;
-/// let u = aligned.apply([12.0, 0.0, 0.0]);
-/// assert!((u - Vector3::new(0.0, 1.0, 0.0)).amax() < 1e-15);
+/// assert_eq!(aligned.apply([12.0, 0.0, 0.0]), [0.0, 1.0, 0.0]);
 /// // A reflection is not a rotation.
-/// assert!(AlignedCalibration::new(cal, Matrix3::from_diagonal_element(-1.0)).is_err());
+/// let mirror = [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]];
+/// assert!(AlignedCalibration::new(cal, mirror).is_err());
 /// # Ok::<(), mag_cal_core::Error>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -367,7 +383,8 @@ impl<T: Real> AlignedCalibration<T> {
     ///   [`Calibration::new`] does for non-finite input);
     /// - [`Error::SingularSystem`] when `R` is not orthonormal to that
     ///   tolerance, or is a reflection (`det R = -1`).
-    pub fn new(calibration: Calibration<T>, rotation: Matrix3<T>) -> Result<Self, Error> {
+    pub fn new(calibration: Calibration<T>, rotation: [[T; 3]; 3]) -> Result<Self, Error> {
+        let rotation = from_rows(rotation);
         if !rotation.iter().all(|x| x.is_finite()) {
             return Err(Error::OutOfRange);
         }
@@ -375,7 +392,7 @@ impl<T: Real> AlignedCalibration<T> {
         if !(defect <= T::EPSILON * T::lit(1e3)) || !(rotation.determinant() > T::zero()) {
             return Err(Error::SingularSystem);
         }
-        let combined = rotation * calibration.soft_iron();
+        let combined = rotation * calibration.w();
         if !combined.iter().all(|x| x.is_finite()) {
             return Err(Error::OutOfRange);
         }
@@ -391,15 +408,21 @@ impl<T: Real> AlignedCalibration<T> {
         self.calibration
     }
 
-    /// The rotation `R` into the reference frame.
-    pub fn rotation(&self) -> Matrix3<T> {
+    /// The rotation `R` into the reference frame, by rows.
+    pub fn rotation(&self) -> [[T; 3]; 3] {
+        rows(&self.rotation)
+    }
+
+    /// [`AlignedCalibration::rotation`] as a matrix (feature `nalgebra`).
+    #[cfg(feature = "nalgebra")]
+    pub fn rotation_matrix(&self) -> Matrix3<T> {
         self.rotation
     }
 
     /// Calibrated reading in the reference frame, on the unit sphere:
-    /// `R W (raw - b)`.
-    pub fn apply(&self, raw: [T; 3]) -> Vector3<T> {
-        self.combined * (Vector3::from(raw) - self.calibration.hard_iron())
+    /// `R W (raw - b)`, from a raw reading of any [`Sample`] type.
+    pub fn apply<S: Sample>(&self, raw: S) -> [T; 3] {
+        (self.combined * (Vector3::from(raw.xyz::<T>()) - self.calibration.b())).into()
     }
 }
 
@@ -457,12 +480,12 @@ mod tests {
                 *u = arr(d);
                 *h = arr(truth * d);
             }
-            let q = procrustes(&u, &h).unwrap();
+            let q = procrustes_matrix(&u, &h).unwrap();
             assert!((q - truth).amax() < 1e-12, "{:e}", (q - truth).amax());
             assert_proper_rotation(&q, 1e-14);
 
             let (u32s, h32s) = (u.map(arr32), h.map(arr32));
-            let q32 = procrustes(&u32s, &h32s).unwrap();
+            let q32 = procrustes_matrix(&u32s, &h32s).unwrap();
             let err = (q32.cast::<f64>() - truth).amax();
             assert!(err < 1e-5, "f32: {err:e}");
             assert_proper_rotation(&q32, 1e-6);
@@ -474,7 +497,7 @@ mod tests {
         let truth = *Rotation3::from_euler_angles(0.3, -1.1, 2.9).matrix();
         let u = [[1.0, 0.0, 0.0], [0.5, 0.5, 0.0]];
         let h = u.map(|v| arr(truth * Vector3::from(v)));
-        let q = procrustes(&u, &h).unwrap();
+        let q = procrustes_matrix(&u, &h).unwrap();
         assert!((q - truth).amax() < 1e-14);
     }
 
@@ -495,7 +518,7 @@ mod tests {
                 (u64s[k], h64s[k]) = (arr(d), arr(truth * d));
                 (u[k], h[k]) = (arr32(u64s[k]), arr32(h64s[k]));
             }
-            let q = procrustes(&u, &h).unwrap();
+            let q = procrustes_matrix(&u, &h).unwrap();
             let err = angle_between(&q.cast(), &truth);
             assert!(err < 1e-4, "{err:e}");
             // A cone 100 times narrower is refused in f32 (the curvature is
@@ -505,10 +528,10 @@ mod tests {
                 (*u, *h) = (arr(d), arr(truth * d));
             }
             assert_eq!(
-                procrustes(&u64s.map(arr32), &h64s.map(arr32)),
+                procrustes_matrix(&u64s.map(arr32), &h64s.map(arr32)),
                 Err(Error::SingularSystem)
             );
-            let q = procrustes(&u64s, &h64s).unwrap();
+            let q = procrustes_matrix(&u64s, &h64s).unwrap();
             assert!(angle_between(&q, &truth) < 1e-10);
         }
     }
@@ -537,7 +560,7 @@ mod tests {
             assert!((uu * vt).determinant() < 0.0);
             let expected = uu * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0)) * vt;
 
-            let q = procrustes(&u, &h).unwrap();
+            let q = procrustes_matrix(&u, &h).unwrap();
             assert_proper_rotation(&q, 1e-13);
             assert!((q - expected).amax() < 1e-9, "{:e}", (q - expected).amax());
             // And it is a minimum among rotations: small turns cost more.
@@ -554,16 +577,19 @@ mod tests {
     #[test]
     fn refuses_malformed_input() {
         let u = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-        assert_eq!(procrustes(&u, &u[..1]), Err(Error::MismatchedLengths));
         assert_eq!(
-            procrustes(&u[..1], &u[..1]),
+            procrustes_matrix(&u, &u[..1]),
+            Err(Error::MismatchedLengths)
+        );
+        assert_eq!(
+            procrustes_matrix(&u[..1], &u[..1]),
             Err(Error::TooFewSamples {
                 found: 1,
                 required: 2
             })
         );
         assert_eq!(
-            procrustes::<f64>(&[], &[]),
+            procrustes_matrix::<f64>(&[], &[]),
             Err(Error::TooFewSamples {
                 found: 0,
                 required: 2
@@ -574,17 +600,17 @@ mod tests {
         let p = [[1.0, 2.0, 3.0], [-2.0, -4.0, -6.0], [0.5, 1.0, 1.5]];
         let r = *Rotation3::from_euler_angles(0.2, 0.4, 0.6).matrix();
         let ph = p.map(|v| arr(r * Vector3::from(v)));
-        assert_eq!(procrustes(&p, &ph), Err(Error::SingularSystem));
+        assert_eq!(procrustes_matrix(&p, &ph), Err(Error::SingularSystem));
         assert_eq!(
-            procrustes(&p.map(arr32), &ph.map(arr32)),
+            procrustes_matrix(&p.map(arr32), &ph.map(arr32)),
             Err(Error::SingularSystem)
         );
         // All zero, or pairs that cancel (B = 0).
         let z = [[0.0; 3]; 3];
-        assert_eq!(procrustes(&z, &p), Err(Error::SingularSystem));
+        assert_eq!(procrustes_matrix(&z, &p), Err(Error::SingularSystem));
         let x = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
         let xh = [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]];
-        assert_eq!(procrustes(&x, &xh), Err(Error::SingularSystem));
+        assert_eq!(procrustes_matrix(&x, &xh), Err(Error::SingularSystem));
         // A point reflection of evenly spread directions: every rotation by
         // 180 deg fits equally well, no unique answer.
         let axes = [
@@ -596,7 +622,7 @@ mod tests {
             [0.0, 0.0, -1.0],
         ];
         let minus = axes.map(|v| v.map(|c: f64| -c));
-        assert_eq!(procrustes(&axes, &minus), Err(Error::SingularSystem));
+        assert_eq!(procrustes_matrix(&axes, &minus), Err(Error::SingularSystem));
     }
 
     #[test]
@@ -614,11 +640,11 @@ mod tests {
         h[4] = [0.0, f64::INFINITY, 0.0];
         u[5] = [f64::NEG_INFINITY; 3];
         h[5] = [f64::NAN; 3];
-        let q = procrustes(&u, &h).unwrap();
+        let q = procrustes_matrix(&u, &h).unwrap();
         assert!((q - r).amax() < 1e-14);
         // One finite pair left is too few.
         assert_eq!(
-            procrustes(&u[2..], &h[2..]),
+            procrustes_matrix(&u[2..], &h[2..]),
             Err(Error::TooFewSamples {
                 found: 1,
                 required: 2
@@ -642,7 +668,7 @@ mod tests {
                 *u = arr(d);
                 *h = arr(truth * d + noise);
             }
-            let q = procrustes(&u, &h).unwrap();
+            let q = procrustes_matrix(&u, &h).unwrap();
             assert_proper_rotation(&q, 1e-13);
             // Expected error about sigma sqrt(3 / (2 n)) ~ 7e-4 rad.
             let err = angle_between(&q, &truth);
@@ -658,7 +684,7 @@ mod tests {
         let h = u.map(|v| arr(r * Vector3::from(v)));
         let big = u.map(|v| v.map(|c| (c * 1e30) as f32));
         let tiny = h.map(|v| v.map(|c| (c * 1e-30) as f32));
-        let q = procrustes(&big, &tiny).unwrap();
+        let q = procrustes_matrix(&big, &tiny).unwrap();
         assert!((q.cast::<f64>() - r).amax() < 1e-6);
     }
 
@@ -725,53 +751,44 @@ mod tests {
     fn aligned_calibration_applies_r_w_y_minus_b() {
         let w = Matrix3::new(0.02, 0.001, 0.0, 0.001, 0.025, -0.002, 0.0, -0.002, 0.018);
         let b = Vector3::new(120.0, -40.0, 15.0);
-        let cal = Calibration::new(b, w).unwrap();
+        let cal = Calibration::from_matrices(b, w).unwrap();
         let r = *Rotation3::from_euler_angles(0.4, -0.2, 1.7).matrix();
-        let aligned = AlignedCalibration::new(cal, r).unwrap();
+        let aligned = AlignedCalibration::new(cal, rows(&r)).unwrap();
         assert_eq!(aligned.calibration(), cal);
-        assert_eq!(aligned.rotation(), r);
+        assert_eq!(aligned.rotation(), rows(&r));
         for y in [[150.0, -10.0, 40.0], [90.0, -80.0, -20.0], [0.0, 0.0, 0.0]] {
-            let expected = r * (cal.soft_iron() * (Vector3::from(y) - b));
-            assert!((aligned.apply(y) - expected).amax() < 1e-14);
-            assert!((aligned.apply(y) - r * cal.apply(y)).amax() < 1e-14);
+            let expected = r * (cal.w() * (Vector3::from(y) - b));
+            let got = Vector3::from(aligned.apply(y));
+            assert!((got - expected).amax() < 1e-14);
+            assert!((got - r * Vector3::from(cal.apply(y))).amax() < 1e-14);
         }
         // f32, with the rotation from procrustes.
         let u = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let h = u.map(|v| arr32(arr(r * Vector3::from(v.map(f64::from)))));
         let q = procrustes(&u, &h).unwrap();
-        let cal32 = Calibration::new(b.cast::<f32>(), w.cast::<f32>()).unwrap();
+        let cal32 = Calibration::from_matrices(b.cast::<f32>(), w.cast::<f32>()).unwrap();
         assert!(AlignedCalibration::new(cal32, q).is_ok());
     }
 
     #[test]
     fn aligned_calibration_rejects_non_rotations() {
-        let cal = Calibration::new(Vector3::new(1.0, 2.0, 3.0), Matrix3::identity()).unwrap();
+        let cal =
+            Calibration::from_matrices(Vector3::new(1.0, 2.0, 3.0), Matrix3::identity()).unwrap();
+        let new = |m: Matrix3<f64>| AlignedCalibration::new(cal, rows(&m));
         let r = *Rotation3::from_euler_angles(0.4, -0.2, 1.7).matrix();
         let mirror = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, 1.0));
-        assert_eq!(
-            AlignedCalibration::new(cal, r * mirror),
-            Err(Error::SingularSystem)
-        );
-        assert_eq!(
-            AlignedCalibration::new(cal, r * 1.001),
-            Err(Error::SingularSystem)
-        );
+        assert_eq!(new(r * mirror), Err(Error::SingularSystem));
+        assert_eq!(new(r * 1.001), Err(Error::SingularSystem));
         let mut skew = r;
         skew[(0, 1)] += 1e-6;
-        assert_eq!(
-            AlignedCalibration::new(cal, skew),
-            Err(Error::SingularSystem)
-        );
-        assert_eq!(
-            AlignedCalibration::new(cal, Matrix3::zeros()),
-            Err(Error::SingularSystem)
-        );
+        assert_eq!(new(skew), Err(Error::SingularSystem));
+        assert_eq!(new(Matrix3::zeros()), Err(Error::SingularSystem));
         let mut nan = r;
         nan[(2, 2)] = f64::NAN;
-        assert_eq!(AlignedCalibration::new(cal, nan), Err(Error::OutOfRange));
+        assert_eq!(new(nan), Err(Error::OutOfRange));
         // Rounding-level defects are accepted.
         let mut nearly = r;
         nearly[(0, 1)] += 1e-14;
-        assert!(AlignedCalibration::new(cal, nearly).is_ok());
+        assert!(new(nearly).is_ok());
     }
 }

@@ -558,7 +558,11 @@ mod tests {
             for (i, s) in samples.iter_mut().enumerate() {
                 // Radial noise from a sum of 12 uniforms (nearly Gaussian).
                 let g: f64 = (0..12).map(|_| rng.range(-0.5, 0.5)).sum();
-                let off = if i % 10 == 0 && i / 10 < displaced { 0.3 } else { 0.0 };
+                let off = if i % 10 == 0 && i / 10 < displaced {
+                    0.3
+                } else {
+                    0.0
+                };
                 let x = b0 + t0 * (rng.direction() * (1.0 + 0.01 * g + off));
                 let y = norm.point_back(&x);
                 *s = [y.x, y.y, y.z];

@@ -2,9 +2,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::linalg::sym_sqrt;
+use crate::linalg::{from_rows, rows, sym_sqrt};
 use crate::normalize::Normalization;
-use crate::{Error, Real};
+use crate::{Error, Real, Sample};
 
 /// A magnetometer calibration: `u = W (y - b)` lies on the unit sphere.
 ///
@@ -24,9 +24,23 @@ pub struct Calibration<T: Real> {
 
 impl<T: Real> Calibration<T> {
     /// Builds a calibration from a hard-iron offset `b` and a soft-iron
-    /// matrix `W` (sensor units). `W` is replaced by its canonical form
-    /// `(W^T W)^(1/2)`; it must be finite and non-singular.
-    pub fn new(hard_iron: Vector3<T>, soft_iron: Matrix3<T>) -> Result<Self, Error> {
+    /// matrix `W` (sensor units; `W` by rows, `soft_iron[i][j]` in row `i`,
+    /// column `j`). `W` is replaced by its canonical form `(W^T W)^(1/2)`;
+    /// it must be finite and non-singular.
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for a non-finite entry or a field strength
+    /// beyond the type's range, [`Error::SingularSystem`] for a singular
+    /// `W`.
+    pub fn new(hard_iron: [T; 3], soft_iron: [[T; 3]; 3]) -> Result<Self, Error> {
+        Self::from_matrices(Vector3::from(hard_iron), from_rows(soft_iron))
+    }
+
+    /// [`Calibration::new`] on the internal types.
+    pub(crate) fn from_matrices(
+        hard_iron: Vector3<T>,
+        soft_iron: Matrix3<T>,
+    ) -> Result<Self, Error> {
         if !hard_iron
             .iter()
             .chain(soft_iron.iter())
@@ -78,19 +92,19 @@ impl<T: Real> Calibration<T> {
     }
 
     /// Hard-iron offset `b`, sensor units.
-    pub fn hard_iron(&self) -> Vector3<T> {
-        self.hard_iron
+    pub fn hard_iron(&self) -> [T; 3] {
+        self.hard_iron.into()
     }
 
-    /// Soft-iron correction `W` (symmetric positive definite, `1 / sensor
-    /// unit`): `W (y - b)` is on the unit sphere.
-    pub fn soft_iron(&self) -> Matrix3<T> {
-        self.soft_iron
+    /// Soft-iron correction `W` by rows (symmetric positive definite,
+    /// `1 / sensor unit`): `W (y - b)` is on the unit sphere.
+    pub fn soft_iron(&self) -> [[T; 3]; 3] {
+        rows(&self.soft_iron)
     }
 
-    /// `M = W^T W`: the gauge-free shape, `(y - b)^T M (y - b) = 1`.
-    pub fn shape(&self) -> Matrix3<T> {
-        self.soft_iron.transpose() * self.soft_iron
+    /// `M = W^T W` by rows: the gauge-free shape, `(y - b)^T M (y - b) = 1`.
+    pub fn shape(&self) -> [[T; 3]; 3] {
+        rows(&self.m())
     }
 
     /// Local field strength `rho = |det T|^(1/3) = det(W)^(-1/3)`, sensor
@@ -99,21 +113,85 @@ impl<T: Real> Calibration<T> {
         self.field_strength
     }
 
-    /// Calibrated reading on the unit sphere: `W (y - b)`.
+    /// Calibrated reading on the unit sphere: `W (y - b)`, from a raw
+    /// reading of any [`Sample`] type (a non-finite reading gives a
+    /// non-finite result).
     ///
     /// ```
-    /// use mag_cal_core::{Calibration, nalgebra::{Matrix3, Vector3}};
-    /// let cal = Calibration::new(Vector3::new(10.0, 0.0, 0.0), Matrix3::identity() * 0.5).unwrap();
-    /// assert_eq!(cal.apply([12.0, 0.0, 0.0]), Vector3::new(1.0, 0.0, 0.0));
+    /// use mag_cal_core::Calibration;
+    /// let half = [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]];
+    /// let cal = Calibration::<f64>::new([10.0, 0.0, 0.0], half).unwrap();
+    /// assert_eq!(cal.apply([12.0, 0.0, 0.0]), [1.0, 0.0, 0.0]);
+    /// // Integer counts as the sensor gives them, e.g. a driver's tuple.
+    /// assert_eq!(cal.apply((10_i16, 2_i16, 0_i16)), [0.0, 1.0, 0.0]);
     /// assert_eq!(cal.field_strength(), 2.0);
     /// ```
-    pub fn apply(&self, raw: [T; 3]) -> Vector3<T> {
-        self.soft_iron * (Vector3::from(raw) - self.hard_iron)
+    pub fn apply<S: Sample>(&self, raw: S) -> [T; 3] {
+        self.map(raw.xyz()).into()
     }
 
     /// Calibrated reading in sensor units: `rho W (y - b)`, whose norm is
     /// the local field strength.
-    pub fn apply_scaled(&self, raw: [T; 3]) -> Vector3<T> {
-        self.apply(raw) * self.field_strength
+    pub fn apply_scaled<S: Sample>(&self, raw: S) -> [T; 3] {
+        (self.map(raw.xyz()) * self.field_strength).into()
+    }
+
+    /// [`Calibration::apply`] on the internal types.
+    pub(crate) fn map(&self, y: [T; 3]) -> Vector3<T> {
+        self.soft_iron * (Vector3::from(y) - self.hard_iron)
+    }
+
+    /// `b` as the internal type.
+    pub(crate) fn b(&self) -> Vector3<T> {
+        self.hard_iron
+    }
+
+    /// `W` as the internal type.
+    pub(crate) fn w(&self) -> Matrix3<T> {
+        self.soft_iron
+    }
+
+    /// `M = W^T W` as the internal type.
+    pub(crate) fn m(&self) -> Matrix3<T> {
+        self.soft_iron.transpose() * self.soft_iron
+    }
+}
+
+/// Conversions for host code that computes with `nalgebra` (feature
+/// `nalgebra`; the types are those of the `nalgebra` release this crate
+/// depends on, 0.35).
+#[cfg(feature = "nalgebra")]
+impl<T: Real> Calibration<T> {
+    /// [`Calibration::new`] from `nalgebra` types.
+    ///
+    /// # Errors
+    /// As [`Calibration::new`].
+    pub fn from_nalgebra(hard_iron: Vector3<T>, soft_iron: Matrix3<T>) -> Result<Self, Error> {
+        Self::from_matrices(hard_iron, soft_iron)
+    }
+
+    /// [`Calibration::hard_iron`] as a vector.
+    pub fn hard_iron_vector(&self) -> Vector3<T> {
+        self.hard_iron
+    }
+
+    /// [`Calibration::soft_iron`] as a matrix.
+    pub fn soft_iron_matrix(&self) -> Matrix3<T> {
+        self.soft_iron
+    }
+
+    /// [`Calibration::shape`] as a matrix.
+    pub fn shape_matrix(&self) -> Matrix3<T> {
+        self.m()
+    }
+
+    /// [`Calibration::apply`] as a vector.
+    pub fn apply_vector<S: Sample>(&self, raw: S) -> Vector3<T> {
+        self.map(raw.xyz())
+    }
+
+    /// [`Calibration::apply_scaled`] as a vector.
+    pub fn apply_scaled_vector<S: Sample>(&self, raw: S) -> Vector3<T> {
+        self.map(raw.xyz()) * self.field_strength
     }
 }

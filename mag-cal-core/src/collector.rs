@@ -473,7 +473,7 @@ fn cell(v: [f32; 3]) -> Option<usize> {
 /// let p = collector.progress();
 /// assert!(p.ready && p.percent == 100 && p.cells_visited >= 36);
 /// let fit = calibrate::<f32, _>(collector.samples(), &Config::default())?;
-/// assert!((fit.calibration.hard_iron().x - 250.0).abs() < 1.0);
+/// assert!((fit.calibration.hard_iron()[0] - 250.0).abs() < 1.0);
 /// # Ok::<(), mag_cal_core::Error>(())
 /// ```
 #[derive(Clone, Debug)]

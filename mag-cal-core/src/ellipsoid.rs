@@ -7,7 +7,6 @@ use crate::linalg::{
     cholesky, cholesky_in_place, cholesky_solve, from_array, min_max, solve3, solve_lower,
     solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt, to_array,
 };
-use crate::moments::Moments;
 use crate::{Error, Real};
 
 /// Which algebraic least-squares solve turns the moments into a quadric.
@@ -56,11 +55,6 @@ pub struct Ellipsoid<T: Real> {
     pub w: Matrix3<T>,
     /// `T' = M'^(-1/2)`: maps the unit sphere onto the ellipsoid.
     pub t: Matrix3<T>,
-}
-
-/// Fits an ellipsoid to the moments with the chosen variant.
-pub fn fit<T: Real>(moments: &Moments<T>, variant: LsVariant) -> Result<Ellipsoid<T>, Error> {
-    fit_scatter(&moments.scatter(), variant)
 }
 
 /// Fits an ellipsoid to the 10x10 scatter with the chosen variant.

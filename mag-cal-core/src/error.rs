@@ -35,8 +35,6 @@ pub enum Error {
         /// Iterations performed.
         iterations: u32,
     },
-    /// A fixed-capacity sample store is full.
-    CapacityExceeded,
     /// Two inputs that must pair up element by element have different
     /// lengths (e.g. calibrated and reference vectors for alignment).
     MismatchedLengths,
@@ -119,7 +117,6 @@ impl fmt::Display for Error {
             Error::NoConvergence { iterations } => {
                 write!(f, "solver did not converge within {iterations} iterations")
             }
-            Error::CapacityExceeded => f.write_str("sample store is full"),
             Error::MismatchedLengths => f.write_str("paired inputs have different lengths"),
             Error::InvalidNoiseCovariance => {
                 f.write_str("noise covariance is not finite, symmetric and positive definite")

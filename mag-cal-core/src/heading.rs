@@ -9,15 +9,14 @@
 //!
 //! ```
 //! use mag_cal_core::heading::{heading_deg, HeadingSmoother, DEFAULT_WINDOW};
-//! use mag_cal_core::nalgebra::Vector3;
 //!
 //! let mut smoother: HeadingSmoother<f32, DEFAULT_WINDOW> = HeadingSmoother::new();
 //! let mut smoothed = None;
 //! for k in 0..21 {
 //!     // A level sensor at heading psi sees (H cos psi, -H sin psi, V).
 //!     let psi = (179.0 + 2.0 * (k % 2) as f32).to_radians(); // 179, 181, ...
-//!     let field = Vector3::new(0.5 * psi.cos(), -0.5 * psi.sin(), 0.87);
-//!     smoothed = smoother.push(heading_deg(&field));
+//!     let field = [0.5 * psi.cos(), -0.5 * psi.sin(), 0.87];
+//!     smoothed = smoother.push(heading_deg(field));
 //! }
 //! // The circular mean of 179 and -179 (= 181) deg is 180, not 0; here
 //! // 179.93, as the last 15 hold one more 179 than 181.
@@ -87,16 +86,15 @@ fn atan2_deg<T: Real>(y: T, x: T) -> T {
 ///
 /// ```
 /// use mag_cal_core::heading::heading_deg;
-/// use mag_cal_core::nalgebra::Vector3;
 /// // A level sensor turned to heading psi sees (H cos psi, -H sin psi, V).
-/// assert_eq!(heading_deg(&Vector3::new(0.5, 0.0, 0.8)), 0.0);
-/// assert_eq!(heading_deg(&Vector3::new(0.0, -0.5, 0.8)), 90.0);
-/// assert_eq!(heading_deg(&Vector3::new(-0.5, 0.0, 0.8)), 180.0);
-/// assert_eq!(heading_deg(&Vector3::new(0.0, 0.5, 0.8)), -90.0);
-/// assert_eq!(heading_deg(&Vector3::new(0.0, 0.0, 0.8)), 0.0);
+/// assert_eq!(heading_deg([0.5, 0.0, 0.8]), 0.0);
+/// assert_eq!(heading_deg([0.0, -0.5, 0.8]), 90.0);
+/// assert_eq!(heading_deg([-0.5, 0.0, 0.8]), 180.0);
+/// assert_eq!(heading_deg([0.0, 0.5, 0.8]), -90.0);
+/// assert_eq!(heading_deg([0.0, 0.0, 0.8]), 0.0);
 /// ```
-pub fn heading_deg<T: Real>(field: &Vector3<T>) -> T {
-    let (x, y) = (field.x, field.y);
+pub fn heading_deg<T: Real>(field: [T; 3]) -> T {
+    let [x, y, _] = field;
     if !x.is_finite() || !y.is_finite() || (x == T::zero() && y == T::zero()) {
         return T::zero();
     }
@@ -124,22 +122,22 @@ pub fn heading_deg<T: Real>(field: &Vector3<T>) -> T {
 ///
 /// ```
 /// use mag_cal_core::heading::tilt_compensated_heading_deg;
-/// use mag_cal_core::nalgebra::Vector3;
 /// // Level, heading 90 (east): the field points to -y in the body.
-/// let field = Vector3::new(0.0, -0.5, 0.866);
-/// let h = tilt_compensated_heading_deg(&field, &Vector3::new(0.0, 0.0, -9.81)).unwrap();
+/// let field = [0.0, -0.5, 0.866];
+/// let h = tilt_compensated_heading_deg(field, [0.0, 0.0, -9.81]).unwrap();
 /// assert!((h - 90.0_f64).abs() < 1e-12);
 /// // Same attitude rolled 30 deg right (about x): both vectors turn with the body.
 /// let (s, c) = (30.0_f64.to_radians().sin(), 30.0_f64.to_radians().cos());
-/// let roll = |v: Vector3<f64>| Vector3::new(v.x, c * v.y + s * v.z, -s * v.y + c * v.z);
-/// let h = tilt_compensated_heading_deg(&roll(field), &roll(Vector3::new(0.0, 0.0, -9.81))).unwrap();
+/// let roll = |v: [f64; 3]| [v[0], c * v[1] + s * v[2], -s * v[1] + c * v[2]];
+/// let h = tilt_compensated_heading_deg(roll(field), roll([0.0, 0.0, -9.81])).unwrap();
 /// assert!((h - 90.0).abs() < 1e-12);
-/// assert_eq!(tilt_compensated_heading_deg(&field, &Vector3::zeros()), None);
+/// assert_eq!(tilt_compensated_heading_deg(field, [0.0; 3]), None);
 /// ```
-pub fn tilt_compensated_heading_deg<T: Real>(field: &Vector3<T>, accel: &Vector3<T>) -> Option<T> {
+pub fn tilt_compensated_heading_deg<T: Real>(field: [T; 3], accel: [T; 3]) -> Option<T> {
     // Unit vectors, scaled by the largest component first so that no square
     // overflows or underflows.
-    let unit = |v: &Vector3<T>| {
+    let unit = |v: [T; 3]| {
+        let v = Vector3::from(v);
         let m = v.amax();
         if !v.iter().all(|c| c.is_finite()) || !(m > T::zero()) {
             return None;
@@ -312,6 +310,15 @@ impl<T: Real, const N: usize> Default for HeadingSmoother<T, N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    // The tests speak nalgebra; the API takes arrays.
+    fn heading_deg<T: Real>(v: &Vector3<T>) -> T {
+        super::heading_deg((*v).into())
+    }
+
+    fn tilt_compensated_heading_deg<T: Real>(f: &Vector3<T>, a: &Vector3<T>) -> Option<T> {
+        super::tilt_compensated_heading_deg((*f).into(), (*a).into())
+    }
     use nalgebra::{Matrix3, Rotation3};
 
     use crate::test_rng::Rng;

@@ -1,38 +1,17 @@
 //! Allocation-free three-axis magnetometer calibration for microcontrollers.
 //!
-//! A raw reading `y` of a distorted magnetometer follows
-//! `y = T h + b + e`: the unit field direction `h`, turned and scaled by the
-//! soft-iron matrix `T`, shifted by the hard-iron offset `b`, plus noise.
-//! Calibration finds `b` and `W = T^-1` such that `u = W (y - b)` lies on the
-//! unit sphere. Only `M = W^T W` and `b` are determined by the data, so `W`
-//! is returned in the canonical symmetric form `M^(1/2)`.
-//!
-//! The crate implements the paper's Algorithm 1, one module per step (the
-//! mathematics is specified in the project's `shared/design/ALGORITHMS.md`):
-//!
-//! | step | module | what |
-//! |---|---|---|
-//! | 0 | [`rules`], [`normalize`] | drop rows by rule; centre and scale the samples (section 2) |
-//! | 1 | [`moments`], [`ellipsoid`] | algebraic LS ellipsoid fit from 35 moments, one pass (section 3) |
-//! | 2-3 | [`artificial`] | unit "artificial" field vectors `h_i` and sufficient statistics, second pass (section 4) |
-//! | 4 | [`quasi_newton`], [`methods`] | ADC2: re-estimate `T`, `b` by BFGS on those statistics (section 5) |
-//! | 5 | [`calibration`] | canonical result, [`Calibration::apply`] |
-//! | judging | [`quality`] | the figures of a fit, turned into warnings or a refusal in one place |
-//!
-//! On contaminated data ([`Config::robust`], on by default) steps 0-4 are
-//! preceded or weighted by [`screen`] and [`robust`] (see
-//! [Outliers](#outliers)).
-//!
-//! Everything runs in `f32` or `f64` through one generic code path
-//! ([`Real`]), on the stack, in two passes over the samples (plus one for
-//! validation and one for the quality figure), with every loop bounded.
-//! No input panics: malformed data ends in an [`Error`].
+//! From a batch of raw readings (a few hundred, taken while the device is
+//! turned through many orientations) [`calibrate`] finds the hard-iron
+//! offset and the soft-iron correction, in `f32` or `f64`, on the stack,
+//! with every loop bounded and no panic for any input. It reports how well
+//! the result fits, or refuses data that are not a calibration with an
+//! [`Error`] that names the cause and the figure that decided it.
 //!
 //! ```
 //! use mag_cal_core::{calibrate, Config};
 //!
 //! // Samples on a shifted, stretched ellipsoid (here generated; in firmware
-//! // they come from the sensor, e.g. as `[i16; 3]`).
+//! // they come from the sensor, e.g. as `[i16; 3]` or `(i16, i16, i16)`).
 //! let samples: Vec<[f32; 3]> = (0..200)
 //!     .map(|i| {
 //!         let z = 1.0 - 2.0 * (i as f32 + 0.5) / 200.0;
@@ -44,22 +23,87 @@
 //!     .collect();
 //!
 //! let fit = calibrate::<f32, _>(&samples, &Config::default())?;
-//! let b = fit.calibration.hard_iron();
-//! assert!((b.x - 300.0).abs() < 1e-2 && (b.y + 120.0).abs() < 1e-2);
-//! let u = fit.calibration.apply(samples[17]);
-//! assert!((u.norm() - 1.0).abs() < 1e-4);
+//! let [bx, by, _] = fit.calibration.hard_iron();
+//! assert!((bx - 300.0).abs() < 1e-2 && (by + 120.0).abs() < 1e-2);
+//! let [ux, uy, uz] = fit.calibration.apply(samples[17]);
+//! assert!(((ux * ux + uy * uy + uz * uz).sqrt() - 1.0).abs() < 1e-4);
 //! assert!(fit.report.radial_rms < 1e-4);
 //! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 //!
-//! Around the fit: [`collector`] gathers samples one at a time on the
-//! device with coverage tracking, [`persist`] stores a calibration as
-//! checksummed bytes, [`quality`] holds the degenerate-geometry checks.
+//! # The model and what is determined
 //!
-//! # Features
-//! - `defmt`: derive `defmt::Format` for [`Error`], [`Method`], [`LsVariant`],
-//!   [`Warning`], [`Warnings`], [`Drops`], [`Rule`], [`SampleClass`],
-//!   [`Thresholds`] and the collector's `Offer` and `Progress`.
+//! A raw reading is `y = T h + b + e`: the unit direction `h` of the local
+//! field in the sensor frame, distorted by the soft-iron matrix `T` (scale,
+//! non-orthogonality and misalignment of the axes, soft iron nearby),
+//! shifted by the hard-iron offset `b`, plus noise `e`. Calibration finds
+//! `b` and `W = T^-1`, so that `u = W (y - b)` lies on the unit sphere
+//! ([`Calibration::apply`]; [`Calibration::apply_scaled`] multiplies by
+//! the field strength).
+//!
+//! The data fix `b` and `M = W^T W` only: for any rotation `Q`, `Q W`
+//! maps the samples onto the sphere as well (the gauge). The calibration
+//! therefore holds the canonical `W = M^(1/2)`, symmetric positive
+//! definite; [`Calibration::shape`] is `M`, and
+//! [`Calibration::field_strength`] is `rho = det(W)^(-1/3)`, the radius of
+//! the sphere of equal volume, in sensor units. Comparing two calibrations
+//! means comparing `M` and `b`, not `W`. Turning the calibrated frame into
+//! the device's body frame is a separate step with reference directions
+//! ([`align`]); headings are in [`heading`].
+//!
+//! Vectors are `[T; 3]`, matrices `[[T; 3]; 3]` by rows (`w[i][j]` in row
+//! `i`, column `j`). Samples are any [`Sample`]: `[i16; 3]`, `[i32; 3]`,
+//! `[f32; 3]`, `[f64; 3]` and the tuples of those types.
+//!
+//! # The fit
+//!
+//! The paper's Algorithm 1 with ADC2 ("artificial data creation"), in
+//! passes over the read-only samples:
+//!
+//! 1. **Scan**: rows that cannot be readings are dropped by rule and
+//!    counted ([`Drops`]): non-finite, too large for the working precision,
+//!    and with outlier handling `(0, 0, 0)`, an axis on the integer rails,
+//!    a row equal to the one before, an axis at a clip level. The rest are
+//!    centred and scaled, `x = (y - c) / s`, so that nothing cancels in
+//!    `f32` at offsets of tens of thousands of counts.
+//! 2. **LS ellipsoid fit**: the quadric `x^T A x + g^T x = 1` through the
+//!    normalised samples by algebraic least squares on 35 moments summed
+//!    in one pass ([`LsVariant::Ls9`]; also the smallest eigenvector of
+//!    the 10x10 scatter and an ellipsoid-specific fit), then its centre
+//!    `b0` and `W0 = M0^(1/2)`.
+//! 3. **Artificial data**: the unit vectors `h_i = u_i / |u_i|` of
+//!    `u_i = W0 (x_i - b0)`, reduced in a second pass to sufficient
+//!    statistics of the residuals `x_i - b0 - T0 h_i` (sums of small terms,
+//!    exact in `f32`).
+//! 4. **Re-estimation** ([`Method`]): ADC2 minimises
+//!    `sum |x_i - b - T h_i|^2` over `T` and `b` (linear in them, so exactly
+//!    quadratic: BFGS with the exact line search on the statistics, no
+//!    further pass). Iterated ADC2 repeats steps 3-4 from each new estimate
+//!    to the fixed point (Anderson-accelerated, a pass each); ADC1 weights
+//!    the residuals by the noise covariance and has ADC2's minimiser;
+//!    subMLE (the paper's baseline) minimises the first-order likelihood
+//!    `sum (|u_i|^2 - 1)^2 / |W^T u_i|^2` with one pass per evaluation.
+//! 5. **Final pass**: the figures of the result ([`Quality`]), judged in one
+//!    place.
+//!
+//! # Quality figures and refusals
+//!
+//! Every figure is relative (unit-free). [`Thresholds::DEFAULT`] holds the
+//! measured limits; [`Config::thresholds`] sets others.
+//!
+//! | figure ([`Quality`]) | what it measures | refused | warned |
+//! |---|---|---|---|
+//! | `flatness` | smallest / largest eigenvalue of the samples' covariance: 1/3-1 for a sphere, 0 for a plane | below 0.03: [`Error::Planar`] | below 0.1 |
+//! | `quadric_gap` | how much better the LS quadric fits than the next one | below 3 on data that fit well: [`Error::AmbiguousQuadric`] | below 10 |
+//! | `distortion` | condition number of `M` (squared axis ratio) | above 16: [`Error::ExtremeDistortion`] | |
+//! | `coverage` | smallest eigenvalue of the calibrated directions' covariance: 1/3 full sphere, 0.085 a +-30 deg band | below 0.05: [`Error::PoorCoverage`] | Gram condition above 20 |
+//! | `fit_error` | robust sigma `1.4826 median||u| - 1|` of the radial residuals, in units of the field | above 0.2: [`Error::NoSphere`] (a device lying still, a filled cloud) | above 0.05 |
+//! | `outlier_share` | share of the valid rows the fit left out | above 0.25: [`Error::TooManyOutliers`] | |
+//! | `lack_of_fit` | systematic radial misfit over 24 direction cells | above 0.01 and significant: [`Error::SystematicMisfit`] | |
+//!
+//! With [`Config::expected_field_strength`] a field strength more than
+//! 25 % off is refused ([`Error::FieldStrengthMismatch`]); fewer than 50
+//! rows and a spread below 10 noise deviations are warned ([`Warning`]).
 //!
 //! # Outliers
 //!
@@ -68,9 +112,7 @@
 //! a magnet or a motor current displacing a stretch of the trajectory. With
 //! [`Config::robust`] (the default) the fit:
 //!
-//! 1. drops rows by rule ([`rules`]: non-finite, too large for the working
-//!    precision, `(0, 0, 0)`, on the integer rails, equal to the row
-//!    before, at a clip level), and counts them by rule ([`Drops`]);
+//! 1. drops rows by rule (above) and counts them by rule;
 //! 2. fits plainly, and keeps that fit when no residual exceeds
 //!    [`CLEAN_LIMIT`] robust standard deviations, their RMS is at most
 //!    [`CLEAN_TAIL`] robust standard deviations and nothing misfits (clean
@@ -78,35 +120,54 @@
 //!    attempt whose LS residuals already show heavy tails
 //!    ([`CLEAN_KURTOSIS`]) or a residual beyond the limit stops before
 //!    its solve or its final pass;
-//! 3. otherwise screens the rows far from a coordinate-wise median centre,
-//!    starts from the crude sphere (median centre, median distance), and
-//!    refits LS with 0/1 weights on the residual (at
-//!    [`methods::OUTLIER_CUT`]` = 3.5` robust standard deviations
-//!    `1.4826 median|r|`, from fixed histograms: no sorting, nothing stored
-//!    per sample), then runs the method with the same weights. The
-//!    quantiles of the screening and the refits before the last two use a
-//!    fixed subsample of about [`screen::SUBSAMPLE_ROWS`] rows (every
-//!    `k`-th row), so their cost hardly grows with `n`.
+//! 3. otherwise screens the rows farther than [`SCREEN_RADIUS`] median
+//!    distances from a coordinate-wise median centre, starts from the crude
+//!    sphere (median centre, median distance), and refits LS with 0/1
+//!    weights on the residual (at [`OUTLIER_CUT`]` = 3.5` robust standard
+//!    deviations `1.4826 median|r|`, from fixed histograms: no sorting,
+//!    nothing stored per sample), then runs the method with the same
+//!    weights. The quantiles of the screening and the refits before the
+//!    last two use a fixed subsample of about [`SUBSAMPLE_ROWS`] rows
+//!    (every `k`-th row), so their cost hardly grows with `n`.
 //!
 //! The report says what happened ([`Report::drops`], [`Report::screened`],
 //! [`Report::rejected`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
 //! and [`Selection::classify`] tells, row by row, which rows the fit used.
-//! Three refusals are added: [`Error::NoSphere`] (a device that lay still,
-//! a filled cloud: fit error above 0.2 of the field),
-//! [`Error::TooManyOutliers`] (more than a quarter of the rows left out) and
-//! [`Error::SystematicMisfit`] (a region of directions sits off the
-//! ellipsoid by more than 1 % of the field). The limits are
-//! [`Config::thresholds`].
 //!
-//! Beyond ADC2, [`Method`] offers the paper's ADC1 (whose minimiser equals
-//! ADC2's, see [`methods::adc1`]) and subMLE baseline, and iterated ADC2,
-//! which reaches subMLE's accuracy at a fraction of its cost.
+//! # Around the fit
+//!
+//! [`collector`] gathers samples one at a time on the device, with
+//! coverage and progress; [`SampleStore`] is a plain fixed-capacity store;
+//! [`persist`] stores a calibration as 92 checksummed bytes.
+//!
+//! # Cost
+//!
+//! LS9 + ADC2 on 1000 `[i16; 3]` samples in `f32` on a Cortex-M4F: about
+//! 400 000 instructions on clean samples (two passes over the samples for
+//! the fit, one for the scan and one for the figures); 0.7-1.8 M on samples
+//! with 10 % of the rows contaminated; about 37 KB of flash and 4 KB of
+//! stack. A [`Config`] known at compile time links only its method and LS
+//! variant.
+//!
+//! # Features
+//! - `defmt`: `defmt::Format` for [`Error`], [`Method`], [`LsVariant`],
+//!   [`Warning`], [`Warnings`], [`Drops`], [`Rule`], [`SampleClass`],
+//!   [`Thresholds`] and the collector's `Offer` and `Progress`.
+//! - `nalgebra`: conversions for host code that computes with `nalgebra`
+//!   0.35 (`Calibration::hard_iron_vector` and the like, [`Sample`] for
+//!   `nalgebra::Vector3`). Without it no `nalgebra` type is in the API.
 //!
 //! # Not supported
 //! Online (recursive) estimation: every method runs on a stored batch.
 //! Temperature compensation, and sensor models beyond `y = T h + b + e`.
 //! Outlier handling for subMLE beyond the drop rules and the screening (its
 //! cost changes with the weights between its own cost evaluations).
+//!
+//! # Source layout
+//! One file per step of Algorithm 1: `rules.rs` and `normalize.rs` (step
+//! 1), `moments.rs` and `ellipsoid.rs` (2), `artificial.rs` (3),
+//! `quasi_newton.rs` and `methods/` (4), `quality.rs` (5), `calibration.rs`
+//! (the result); `screen.rs` and `robust.rs` for outliers.
 
 #![no_std]
 // Denied, not forbidden: the one exception is the FPU square root of
@@ -118,25 +179,25 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod align;
-pub mod artificial;
-pub mod calibration;
+mod artificial;
+mod calibration;
 pub mod collector;
-pub mod ellipsoid;
+mod ellipsoid;
 mod error;
 pub mod heading;
 mod histogram;
 mod linalg;
-pub mod methods;
-pub mod moments;
-pub mod normalize;
+mod methods;
+mod moments;
+mod normalize;
 pub mod persist;
 pub mod quality;
-pub mod quasi_newton;
+mod quasi_newton;
 mod real;
-pub mod robust;
-pub mod rules;
+mod robust;
+mod rules;
 mod sample;
-pub mod screen;
+mod screen;
 #[cfg(test)]
 mod test_rng;
 
@@ -148,14 +209,25 @@ struct ReadmeDoctests;
 pub use calibration::Calibration;
 pub use ellipsoid::LsVariant;
 pub use error::{Error, Figure};
-pub use methods::Method;
-pub use nalgebra;
+pub use methods::{Method, OUTLIER_CUT};
 pub use normalize::MIN_SAMPLES;
 use quality::Figures;
 pub use quality::{Quality, Thresholds, Warning, Warnings};
 pub use real::Real;
 pub use rules::{Drops, Rule, SampleClass, Selection};
 pub use sample::{Sample, SampleStore};
+pub use screen::{SCREEN_RADIUS, SUBSAMPLE_ROWS};
+
+/// Pieces of the pipeline for this repository's benchmarks and tests.
+/// Not part of the API: anything here may change or go in any release.
+#[doc(hidden)]
+pub mod __unstable {
+    pub use crate::artificial::Stats;
+    pub use crate::ellipsoid::{fit_scatter, Ellipsoid};
+    pub use crate::methods::adc2;
+    pub use crate::moments::Moments;
+    pub use crate::normalize::Normalization;
+}
 
 /// What to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -385,10 +457,8 @@ fn plain_path<T: Real, S: Sample>(
     let sigma = fit.report.quality.fit_error;
     // Heavy tails: a contamination that broadened every residual, so that
     // none stands out.
-    let is_clean = method_clean
-        && clean_limit(done.final_max, sigma)
-        && !done.heavy_tails
-        && !done.misfit;
+    let is_clean =
+        method_clean && clean_limit(done.final_max, sigma) && !done.heavy_tails && !done.misfit;
     *clean = is_clean;
     Ok(fit)
 }

@@ -39,6 +39,23 @@ pub(crate) fn from_array<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N,
     SMatrix::from_data(ArrayStorage(a))
 }
 
+/// The rows of a 3x3 matrix, `a[row][column]`: the public API's form.
+pub(crate) fn rows<T: Real>(m: &Matrix3<T>) -> [[T; 3]; 3] {
+    let c = m.data.0;
+    [
+        [c[0][0], c[1][0], c[2][0]],
+        [c[0][1], c[1][1], c[2][1]],
+        [c[0][2], c[1][2], c[2][2]],
+    ]
+}
+
+/// The 3x3 matrix of rows `r` (`r[row][column]`).
+pub(crate) fn from_rows<T: Real>(r: [[T; 3]; 3]) -> Matrix3<T> {
+    Matrix3::new(
+        r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
+    )
+}
+
 /// The larger of two numbers, by one comparison (a NaN `a` is kept, a NaN
 /// `b` ignored). `T::max` goes through libm's `fmaxf`/`fmax`: a function
 /// call for NaN handling that callers here, on values already checked

@@ -36,15 +36,15 @@
 //! (an `f64` round trip is exact).
 //!
 //! ```
-//! use mag_cal_core::{Calibration, nalgebra::{Matrix3, Vector3}};
+//! use mag_cal_core::Calibration;
 //! use mag_cal_core::persist::{from_bytes, to_bytes, ENCODED_LEN};
 //!
-//! let b = Vector3::new(180.0, -95.0, 240.0);
-//! let cal = Calibration::<f32>::new(b, Matrix3::identity() / 320.0)?;
+//! let w = [[1.0 / 320.0, 0.0, 0.0], [0.0, 1.0 / 320.0, 0.0], [0.0, 0.0, 1.0 / 320.0]];
+//! let cal = Calibration::<f32>::new([180.0, -95.0, 240.0], w)?;
 //! let bytes: [u8; ENCODED_LEN] = to_bytes(&cal);
 //! // ... written to flash, read back after a reset, maybe by an f64 tool:
 //! let back = from_bytes::<f64>(&bytes)?;
-//! assert_eq!(back.hard_iron(), cal.hard_iron().cast::<f64>());
+//! assert_eq!(back.hard_iron(), cal.hard_iron().map(f64::from));
 //! assert!((back.field_strength() - 320.0).abs() < 1e-3);
 //! # Ok::<(), mag_cal_core::Error>(())
 //! ```
@@ -120,10 +120,11 @@ fn precision_of<T: Real>() -> u8 {
 /// layout.
 ///
 /// ```
-/// use mag_cal_core::{Calibration, nalgebra::{Matrix3, Vector3}};
+/// use mag_cal_core::Calibration;
 /// use mag_cal_core::persist::{crc32, to_bytes, ENCODED_LEN, MAGIC};
 ///
-/// let cal = Calibration::<f64>::new(Vector3::new(1.0, 2.0, 3.0), Matrix3::identity() * 0.5)?;
+/// let half = [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]];
+/// let cal = Calibration::<f64>::new([1.0, 2.0, 3.0], half)?;
 /// let bytes = to_bytes(&cal);
 /// assert_eq!(bytes[..4], MAGIC);
 /// assert_eq!(bytes[4], 1);
@@ -132,8 +133,8 @@ fn precision_of<T: Real>() -> u8 {
 /// # Ok::<(), mag_cal_core::Error>(())
 /// ```
 pub fn to_bytes<T: Real>(cal: &Calibration<T>) -> [u8; ENCODED_LEN] {
-    let b = cal.hard_iron();
-    let w = cal.soft_iron();
+    let b = cal.b();
+    let w = cal.w();
     let values: [T; VALUES] = [
         b.x,
         b.y,
@@ -211,10 +212,11 @@ impl Reader<'_> {
 ///   singular in `T`.
 ///
 /// ```
-/// use mag_cal_core::{Calibration, Error, nalgebra::{Matrix3, Vector3}};
+/// use mag_cal_core::{Calibration, Error};
 /// use mag_cal_core::persist::{from_bytes, to_bytes};
 ///
-/// let cal = Calibration::<f32>::new(Vector3::new(1.0, 2.0, 3.0), Matrix3::identity() * 0.5)?;
+/// let half = [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]];
+/// let cal = Calibration::<f32>::new([1.0, 2.0, 3.0], half)?;
 /// let mut bytes = to_bytes(&cal);
 /// assert_eq!(from_bytes::<f32>(&bytes)?, cal);
 /// assert_eq!(from_bytes::<f32>(&bytes[..50]), Err(Error::Truncated));

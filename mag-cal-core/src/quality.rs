@@ -489,7 +489,7 @@ pub(crate) struct FinalPass<T: Real> {
 /// as a method's artificial-data pass leaves them (see
 /// [`crate::methods::Estimate::directions`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DirectionSums<T: Real> {
+pub(crate) struct DirectionSums<T: Real> {
     /// Samples with a direction.
     pub count: usize,
     /// `sum h`.

@@ -3,7 +3,10 @@
 use nalgebra::RealField;
 
 mod sealed {
-    pub trait Sealed {}
+    /// The linear algebra the core computes with internally: not part of
+    /// the public API (a release of that library is not a release of this
+    /// one).
+    pub trait Sealed: super::RealField + Copy {}
     impl Sealed for f32 {}
     impl Sealed for f64 {}
 }
@@ -11,7 +14,18 @@ mod sealed {
 /// A floating-point scalar the calibration can run in: `f32` or `f64`.
 ///
 /// Sealed: the numerics (tolerances, range checks) are tuned for these two.
-pub trait Real: RealField + Copy + sealed::Sealed {
+pub trait Real:
+    Copy
+    + PartialOrd
+    + core::fmt::Debug
+    + core::fmt::Display
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::Div<Output = Self>
+    + core::ops::Neg<Output = Self>
+    + sealed::Sealed
+{
     /// Machine epsilon of the type.
     const EPSILON: Self;
     /// Smallest positive normal number of the type.
@@ -33,6 +47,11 @@ pub trait Real: RealField + Copy + sealed::Sealed {
     /// Rounds to `f32` (the identity for `f32`; out-of-range `f64` values
     /// become infinite), for histogram bins.
     fn to_single(self) -> f32;
+    /// The value in the other (or the same) precision: exact from `f32`,
+    /// rounded to nearest from `f64` to `f32` (out-of-range values become
+    /// infinite). From `f32` to `f32` it is the identity, with no `f64`
+    /// detour (soft-float on a Cortex-M4F).
+    fn cast<U: Real>(self) -> U;
     /// `1 / sqrt(x)` for a positive normal `x`, to the type's precision.
     ///
     /// `f32` on a hard-float ARM target (Cortex-M4F and up): the FPU's
@@ -78,6 +97,10 @@ impl Real for f32 {
     #[inline]
     fn from_single(x: f32) -> Self {
         x
+    }
+    #[inline(always)]
+    fn cast<U: Real>(self) -> U {
+        U::from_single(self)
     }
     #[inline]
     fn to_single(self) -> f32 {
@@ -135,6 +158,10 @@ impl Real for f64 {
     #[inline]
     fn from_single(x: f32) -> Self {
         x as f64
+    }
+    #[inline(always)]
+    fn cast<U: Real>(self) -> U {
+        U::lit(self)
     }
     #[inline]
     fn to_single(self) -> f32 {

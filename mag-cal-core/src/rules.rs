@@ -40,7 +40,8 @@ pub struct Drops {
     /// Rows equal to the row before.
     pub repeated: usize,
     /// Rows with a component at a clip level: an axis's extreme value that
-    /// many rows share ([`CLIP_SHARE`]), where a saturated axis stops.
+    /// many rows share (at least 1/64 of them, and 5), where a saturated
+    /// axis stops.
     pub clipped: usize,
 }
 
@@ -419,7 +420,7 @@ impl<T: Real> Selection<T> {
             }
             match self.residual_limit {
                 Some(limit) => {
-                    let r = calibration.apply(y).norm() - T::one();
+                    let r = calibration.map(y).norm() - T::one();
                     if r.abs() <= limit {
                         SampleClass::Used
                     } else {

@@ -1,11 +1,12 @@
 //! Raw samples: the element types the fit accepts, and a fixed-capacity store.
 
-use crate::{Error, Real};
+use crate::Real;
 
 /// One raw three-axis reading, in whatever unit the sensor gives.
 ///
 /// Implemented for `[f32; 3]`, `[f64; 3]`, `[i16; 3]` (the native output of
-/// most magnetometers: 6 bytes a sample) and `[i32; 3]`. Conversion to the
+/// most magnetometers: 6 bytes a sample) and `[i32; 3]`, and for the tuples
+/// of the same types (`(i16, i16, i16)`, ...). Conversion to the
 /// working precision happens per sample inside each pass, so a store of `i16`
 /// never needs a floating-point copy. `PartialEq` compares raw rows: the
 /// repetition rule ([`crate::Rule::Repeated`]) drops a row equal to the one
@@ -45,27 +46,18 @@ pub trait Sample: Copy + PartialEq {
 // The conversions are written out per component: `<[_; 3]>::map` compiles
 // to a loop through the stack at opt-level "s", in every per-sample pass.
 
-impl Sample for [f32; 3] {
+/// `[f32; 3]` and `[f64; 3]` (generic, so code generic over [`Real`] can
+/// pass its own arrays).
+impl<R: Real> Sample for [R; 3] {
     #[inline]
     fn xyz<T: Real>(&self) -> [T; 3] {
         let [x, y, z] = *self;
-        [T::from_single(x), T::from_single(y), T::from_single(z)]
+        [x.cast(), y.cast(), z.cast()]
     }
     #[inline(always)]
     fn is_zero(&self) -> bool {
-        *self == [0.0; 3]
-    }
-}
-
-impl Sample for [f64; 3] {
-    #[inline]
-    fn xyz<T: Real>(&self) -> [T; 3] {
-        let [x, y, z] = *self;
-        [T::lit(x), T::lit(y), T::lit(z)]
-    }
-    #[inline(always)]
-    fn is_zero(&self) -> bool {
-        *self == [0.0; 3]
+        let zero = R::zero();
+        self[0] == zero && self[1] == zero && self[2] == zero
     }
 }
 
@@ -111,11 +103,61 @@ impl Sample for [i32; 3] {
     }
 }
 
+/// Tuples, as drivers return readings (e.g. the `lsm303agr` crate's
+/// `MagneticField::xyz_unscaled()`, `(i16, i16, i16)`): the same as the
+/// array of the three components.
+macro_rules! tuple_sample {
+    ($(<$($g:ident: $b:ident)?> $t:ty),*) => {$(
+        impl<$($g: $b)?> Sample for ($t, $t, $t) {
+            #[inline]
+            fn xyz<T: Real>(&self) -> [T; 3] {
+                [self.0, self.1, self.2].xyz()
+            }
+            const ALWAYS_FINITE: bool = <[$t; 3] as Sample>::ALWAYS_FINITE;
+            #[inline(always)]
+            fn on_rails(&self) -> bool {
+                [self.0, self.1, self.2].on_rails()
+            }
+            #[inline(always)]
+            fn is_zero(&self) -> bool {
+                [self.0, self.1, self.2].is_zero()
+            }
+        }
+    )*};
+}
+
+tuple_sample!(<R: Real> R, <> i16, <> i32);
+
+/// `nalgebra` vectors of the same types (feature `nalgebra`).
+#[cfg(feature = "nalgebra")]
+macro_rules! vector_sample {
+    ($(<$($g:ident: $b:ident)?> $t:ty),*) => {$(
+        impl<$($g: $b)?> Sample for nalgebra::Vector3<$t> {
+            #[inline]
+            fn xyz<T: Real>(&self) -> [T; 3] {
+                [self.x, self.y, self.z].xyz()
+            }
+            const ALWAYS_FINITE: bool = <[$t; 3] as Sample>::ALWAYS_FINITE;
+            #[inline(always)]
+            fn on_rails(&self) -> bool {
+                [self.x, self.y, self.z].on_rails()
+            }
+            #[inline(always)]
+            fn is_zero(&self) -> bool {
+                [self.x, self.y, self.z].is_zero()
+            }
+        }
+    )*};
+}
+
+#[cfg(feature = "nalgebra")]
+vector_sample!(<R: Real> R, <> i16, <> i32);
+
 /// A fixed-capacity store for firmware that collects samples one at a time.
 ///
 /// Capacity is the const generic `N`; the memory is `N * size_of::<S>()`
-/// bytes inline, no heap. A full store refuses further samples with
-/// [`Error::CapacityExceeded`] instead of panicking.
+/// bytes inline, no heap. A full store hands a further sample back
+/// instead of panicking.
 ///
 /// ```
 /// use mag_cal_core::SampleStore;
@@ -123,7 +165,7 @@ impl Sample for [i32; 3] {
 /// store.push([1, 2, 3]).unwrap();
 /// store.push([4, 5, 6]).unwrap();
 /// assert!(store.is_full());
-/// assert!(store.push([7, 8, 9]).is_err());
+/// assert_eq!(store.push([7, 8, 9]), Err([7, 8, 9]));
 /// assert_eq!(store.as_slice().len(), 2);
 /// ```
 #[derive(Clone, Debug, Default)]
@@ -139,11 +181,10 @@ impl<S: Sample, const N: usize> SampleStore<S, N> {
         }
     }
 
-    /// Appends one sample, or returns [`Error::CapacityExceeded`] when full.
-    pub fn push(&mut self, sample: S) -> Result<(), Error> {
-        self.samples
-            .push(sample)
-            .map_err(|_| Error::CapacityExceeded)
+    /// Appends one sample; a full store hands it back (`Err(sample)`, as
+    /// `heapless::Vec::push` does).
+    pub fn push(&mut self, sample: S) -> Result<(), S> {
+        self.samples.push(sample)
     }
 
     /// The stored samples, oldest first: what [`crate::calibrate`] takes.

@@ -45,7 +45,7 @@ pub const RESOLVED_BINS: usize = 16;
 pub const MAX_LEVELS: u32 = 12;
 
 /// The median distance, the shell band and the crude start, and the
-/// robust LS refits before the last ([`crate::robust`]), run on a fixed
+/// robust LS refits before the last two, run on a fixed
 /// subsample of about this many rows (every `k`-th row, `k` at least 1).
 /// A quantile or the set of outliers is settled as well on a few hundred
 /// rows as on all of them, at a fraction of the passes' cost. The bounds

@@ -1,10 +1,10 @@
 //! Stored calibrations: round trips, corruption, truncation, hostile bytes.
 
-use mag_cal_core::nalgebra::{Matrix3, Rotation3, Vector3};
 use mag_cal_core::persist::{
     crc32, from_bytes, to_bytes, ENCODED_LEN, MAGIC, PRECISION_F32, PRECISION_F64, VERSION,
 };
 use mag_cal_core::{calibrate, Calibration, Config, Error};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// A tiny LCG (Knuth's MMIX constants); the high bits are used.
 struct Lcg(u64);
@@ -37,7 +37,12 @@ fn sample_calibration<T: mag_cal_core::Real>() -> Calibration<T> {
     let t = r.matrix() * Matrix3::from_diagonal(&Vector3::new(1.25, 0.85, 1.05)) * 320.0;
     let w = t.try_inverse().unwrap().map(T::lit);
     let b = Vector3::new(180.25, -95.5, 240.125).map(T::lit);
-    Calibration::new(b, w).unwrap()
+    cal_new(b, w).unwrap()
+}
+
+/// `Calibration::new` from nalgebra types (`W` by rows).
+fn cal_new<T: mag_cal_core::Real>(b: Vector3<T>, w: Matrix3<T>) -> Result<Calibration<T>, Error> {
+    Calibration::new(b.into(), w.transpose().into())
 }
 
 /// Recomputes the CRC of a (modified) record.
@@ -76,9 +81,9 @@ fn layout() {
     assert_eq!(bytes[4], VERSION);
     assert_eq!(bytes[5], PRECISION_F64);
     assert_eq!(bytes[6..8], [0, 0]);
-    assert_eq!(get_f64(&bytes, 0), cal.hard_iron().x);
-    assert_eq!(get_f64(&bytes, 4), cal.soft_iron()[(0, 1)]);
-    assert_eq!(get_f64(&bytes, 8), cal.soft_iron()[(2, 2)]);
+    assert_eq!(get_f64(&bytes, 0), Vector3::from(cal.hard_iron()).x);
+    assert_eq!(get_f64(&bytes, 4), Matrix3::from(cal.soft_iron())[(0, 1)]);
+    assert_eq!(get_f64(&bytes, 8), Matrix3::from(cal.soft_iron())[(2, 2)]);
     assert_eq!(get_f64(&bytes, 9), cal.field_strength());
     assert_eq!(to_bytes(&sample_calibration::<f32>())[5], PRECISION_F32);
 }
@@ -99,10 +104,13 @@ fn round_trip_f64() {
 fn round_trip_f32() {
     let cal = sample_calibration::<f32>();
     let back = from_bytes::<f32>(&to_bytes(&cal)).unwrap();
-    assert_eq!(back.hard_iron(), cal.hard_iron());
+    assert_eq!(
+        Vector3::from(back.hard_iron()),
+        Vector3::from(cal.hard_iron())
+    );
     let e_w = max_rel(
-        &back.soft_iron().cast::<f64>(),
-        &cal.soft_iron().cast::<f64>(),
+        &Matrix3::from(back.soft_iron()).cast::<f64>(),
+        &Matrix3::from(cal.soft_iron()).cast::<f64>(),
     );
     let e_rho = (f64::from(back.field_strength()) / f64::from(cal.field_strength()) - 1.0).abs();
     println!("f32 round trip: W {e_w:.1e}, rho {e_rho:.1e}");
@@ -114,16 +122,28 @@ fn cross_precision() {
     // Written by an f64 host tool, read by f32 firmware.
     let cal64 = sample_calibration::<f64>();
     let cal32 = from_bytes::<f32>(&to_bytes(&cal64)).unwrap();
-    assert_eq!(cal32.hard_iron(), cal64.hard_iron().map(|v| v as f32));
-    let e_w = max_rel(&cal32.soft_iron().cast::<f64>(), &cal64.soft_iron());
+    assert_eq!(
+        Vector3::from(cal32.hard_iron()),
+        Vector3::from(cal64.hard_iron()).map(|v| v as f32)
+    );
+    let e_w = max_rel(
+        &Matrix3::from(cal32.soft_iron()).cast::<f64>(),
+        &Matrix3::from(cal64.soft_iron()),
+    );
     let e_rho = (f64::from(cal32.field_strength()) / cal64.field_strength() - 1.0).abs();
     println!("f64 -> f32: W {e_w:.1e}, rho {e_rho:.1e}");
     assert!(e_w < 1e-6 && e_rho < 1e-6, "{e_w} {e_rho}");
     // And the other way: f32 values widen exactly.
     let cal32 = sample_calibration::<f32>();
     let cal64 = from_bytes::<f64>(&to_bytes(&cal32)).unwrap();
-    assert_eq!(cal64.hard_iron(), cal32.hard_iron().cast::<f64>());
-    let e_w = max_rel(&cal64.soft_iron(), &cal32.soft_iron().cast::<f64>());
+    assert_eq!(
+        Vector3::from(cal64.hard_iron()),
+        Vector3::from(cal32.hard_iron()).cast::<f64>()
+    );
+    let e_w = max_rel(
+        &Matrix3::from(cal64.soft_iron()),
+        &Matrix3::from(cal32.soft_iron()).cast::<f64>(),
+    );
     assert!(e_w < 1e-14, "{e_w}");
     // A fitted calibration, as firmware would store it.
     let samples: Vec<[f32; 3]> = (0..300)
@@ -142,9 +162,11 @@ fn cross_precision() {
     let bytes = to_bytes(&fit.calibration);
     let back32 = from_bytes::<f32>(&bytes).unwrap();
     let back64 = from_bytes::<f64>(&bytes).unwrap();
-    let u = fit.calibration.apply(samples[7]);
-    assert!((back32.apply(samples[7]) - u).norm() < 1e-6);
-    assert!((back64.apply(samples[7].map(f64::from)).cast::<f32>() - u).norm() < 1e-6);
+    let u = Vector3::from(fit.calibration.apply(samples[7]));
+    assert!((Vector3::from(back32.apply(samples[7])) - u).norm() < 1e-6);
+    assert!(
+        (Vector3::from(back64.apply(samples[7].map(f64::from))).cast::<f32>() - u).norm() < 1e-6
+    );
 }
 
 #[test]
@@ -161,12 +183,12 @@ fn ill_conditioned_calibrations_round_trip() {
         let w = r.matrix() * Matrix3::from_diagonal(&s) * r.matrix().transpose() * scale;
         let b = Vector3::new(rng.unit(), rng.unit(), rng.unit()) * 1000.0;
         if k % 2 == 0 {
-            let cal = Calibration::<f32>::new(b.cast(), w.cast()).unwrap();
+            let cal = cal_new::<f32>(b.cast(), w.cast()).unwrap();
             let bytes = to_bytes(&cal);
             assert!(from_bytes::<f32>(&bytes).is_ok(), "{k}: {w}");
             assert!(from_bytes::<f64>(&bytes).is_ok(), "{k}: {w}");
         } else {
-            let cal = Calibration::<f64>::new(b, w).unwrap();
+            let cal = cal_new::<f64>(b, w).unwrap();
             let bytes = to_bytes(&cal);
             assert!(from_bytes::<f64>(&bytes).is_ok(), "{k}: {w}");
         }
@@ -295,13 +317,12 @@ fn inconsistent_records_with_a_valid_crc_are_refused() {
 
 #[test]
 fn values_beyond_f32_range_are_refused_in_f32_only() {
-    let cal =
-        Calibration::<f64>::new(Vector3::new(1e300, 0.0, 0.0), Matrix3::identity() * 1e-3).unwrap();
+    let cal = cal_new::<f64>(Vector3::new(1e300, 0.0, 0.0), Matrix3::identity() * 1e-3).unwrap();
     let bytes = to_bytes(&cal);
     assert_eq!(from_bytes::<f64>(&bytes), Ok(cal));
     assert_eq!(from_bytes::<f32>(&bytes), Err(Error::OutOfRange));
     // A W so small that it vanishes in f32.
-    let cal = Calibration::<f64>::new(Vector3::zeros(), Matrix3::identity() * 1e-60).unwrap();
+    let cal = cal_new::<f64>(Vector3::zeros(), Matrix3::identity() * 1e-60).unwrap();
     let bytes = to_bytes(&cal);
     assert!(from_bytes::<f64>(&bytes).is_ok());
     assert!(from_bytes::<f32>(&bytes).is_err());
@@ -365,10 +386,8 @@ fn fuzz_never_panics() {
 /// record then failed its own consistency check on reading.
 #[test]
 fn huge_field_strength_in_f32_is_exact_and_round_trips() {
-    use mag_cal_core::nalgebra::{Matrix3, Vector3};
-    use mag_cal_core::Calibration;
     let w = Matrix3::from_diagonal(&Vector3::new(7.349879e-15f32, 3.8492129e-16, 2.1973967e-13));
-    let cal = Calibration::<f32>::new(Vector3::new(75.27761, 522.31775, -862.0255), w).unwrap();
+    let cal = cal_new::<f32>(Vector3::new(75.27761, 522.31775, -862.0255), w).unwrap();
     let want = 1.0 / (7.349879e-15f64 * 3.8492129e-16 * 2.1973967e-13).cbrt();
     let rho = f64::from(cal.field_strength());
     assert!((rho / want - 1.0).abs() < 1e-6, "{rho} vs {want}");

@@ -48,7 +48,6 @@ use mag_cal_core::collector::Collector;
 use mag_cal_core::heading::{
     heading_deg, tilt_compensated_heading_deg, wrap_deg, HeadingSmoother, DEFAULT_WINDOW,
 };
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::{calibrate, persist, Calibration, Config, Method, Real, Sample, SampleStore};
 
 extern "C" {
@@ -236,17 +235,19 @@ fn fit<T: Real, S: Sample>(samples: &'static RawSlice<S>, raw: [T; 3]) {
 #[cfg(feature = "calibration")]
 #[inline(never)]
 fn calibration<T: Real>(scalars: &'static Scalars<T>) {
-    let b = Vector3::from(opaque(&scalars.hard_iron));
+    let b = opaque(&scalars.hard_iron);
     let w = opaque(&scalars.soft_iron);
-    let w = Matrix3::from_fn(|r, c| w[r][c]);
     let r = opaque(&scalars.rotation);
-    let r = Matrix3::from_fn(|i, j| r[i][j]);
     let raw = opaque(&scalars.raw);
     let cal = Calibration::new(b, w);
     if let Ok(cal) = &cal {
         keep(cal.apply(raw));
         keep(cal.apply_scaled(raw));
+        // Readings as a driver returns them.
+        keep(cal.apply(opaque(&(1_i16, -2_i16, 3_i16))));
         keep(cal.shape());
+        keep(cal.soft_iron());
+        keep(cal.hard_iron());
         keep(cal.field_strength());
         let aligned = AlignedCalibration::new(*cal, r);
         if let Ok(aligned) = &aligned {
@@ -271,10 +272,10 @@ fn align<T: Real>(pairs: [&'static RawSlice<[T; 3]>; 2]) {
 #[cfg(feature = "heading")]
 #[inline(never)]
 fn heading<T: Real>(scalars: &'static Scalars<T>) {
-    let field = Vector3::from(opaque(&scalars.raw));
-    let accel = Vector3::from(opaque(&scalars.accel));
-    keep(heading_deg(&field));
-    keep(tilt_compensated_heading_deg(&field, &accel));
+    let field = opaque(&scalars.raw);
+    let accel = opaque(&scalars.accel);
+    keep(heading_deg(field));
+    keep(tilt_compensated_heading_deg(field, accel));
     keep(wrap_deg(opaque(&scalars.heading)));
 
     let mut default: HeadingSmoother<T, DEFAULT_WINDOW> = HeadingSmoother::new();

@@ -57,12 +57,7 @@ fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
 }
 
 /// [`run`] with environment variables set for the command.
-fn run_with(
-    dir: &Path,
-    program: &str,
-    args: &[&str],
-    envs: &[(&str, &str)],
-) -> Result<(), String> {
+fn run_with(dir: &Path, program: &str, args: &[&str], envs: &[(&str, &str)]) -> Result<(), String> {
     println!("\n==> ({}) {program} {}", dir.display(), args.join(" "));
     let status = Command::new(program)
         .args(args)
@@ -199,8 +194,7 @@ fn test_all() -> Result<(), String> {
 /// The value of the first `key = "value"` line after the line `section` of
 /// the TOML file `path` (enough for this repository's manifests).
 fn toml_value(path: &Path, section: &str, key: &str) -> Result<String, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let prefix = format!("{key} = \"");
     text.lines()
         .skip_while(|l| l.trim() != section)
@@ -224,7 +218,10 @@ fn package_check() -> Result<(), String> {
     let version = toml_value(&root.join("Cargo.toml"), "[workspace.package]", "version")?;
     let toolchain = toml_value(&root.join("rust-toolchain.toml"), "[toolchain]", "channel")?;
     let name = format!("mag-cal-core-{version}");
-    let archive = root.join("target").join("package").join(format!("{name}.crate"));
+    let archive = root
+        .join("target")
+        .join("package")
+        .join(format!("{name}.crate"));
     let dir = std::env::temp_dir().join("mag-cal-package-check");
     // A stale copy from an earlier run must not be tested.
     if dir.exists() {

@@ -45,9 +45,9 @@ use firmware_example::storage::{self, FlashStorage, LoadError, RECORD_LEN};
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
 use mag_cal_core::collector::{Collector, READY_SAMPLES};
-use mag_cal_core::nalgebra::{Matrix3, Vector3};
 use mag_cal_core::persist::{from_bytes, to_bytes};
 use mag_cal_core::{calibrate, Calibration, Config, Error};
+use nalgebra::Vector3;
 
 /// The generated vectors (not formatted by rustfmt, not edited by hand).
 mod vectors {
@@ -137,7 +137,7 @@ fn parity(case: &vectors::Case) -> bool {
     let mut dm = 0.0f64;
     for (i, row) in case.m.iter().enumerate() {
         for (j, want) in row.iter().enumerate() {
-            dm = dm.max(libm::fabs(f64::from(m[(i, j)]) - want) / m_max);
+            dm = dm.max(libm::fabs(f64::from(m[i][j]) - want) / m_max);
         }
     }
     let db = libm::sqrt(
@@ -257,12 +257,13 @@ fn persist_round_trip() -> bool {
             return false;
         }
     };
-    let same_bits = |a: &Matrix3<f32>, b: &Matrix3<f32>| {
+    let same_bits = |a: &[[f32; 3]; 3], b: &[[f32; 3]; 3]| {
         a.iter()
-            .zip(b.iter())
+            .flatten()
+            .zip(b.iter().flatten())
             .all(|(x, y)| x.to_bits() == y.to_bits())
     };
-    let same_b = |a: Vector3<f32>, b: Vector3<f32>| {
+    let same_b = |a: [f32; 3], b: [f32; 3]| {
         a.iter()
             .zip(b.iter())
             .all(|(x, y)| x.to_bits() == y.to_bits())
@@ -368,8 +369,10 @@ fn collector_sphere() -> bool {
     }
     match calibrate::<f32, _>(c.samples(), &Config::default()) {
         Ok(fit) => {
-            let e_b =
-                (fit.calibration.hard_iron() - Vector3::new(180.0, -95.0, 240.0)).norm() / 320.0;
+            let e_b = (Vector3::from(fit.calibration.hard_iron())
+                - Vector3::new(180.0, -95.0, 240.0))
+            .norm()
+                / 320.0;
             info!("collector: calibration at ready, e_b = {=f32}", e_b);
             e_b < 0.02
         }

@@ -315,7 +315,8 @@ fit's (in units of the field). Magneto 1.4 rejects 10 of the 300 rows of \
                     .map(|(k, n)| format!("{n} {k}"))
                     .collect();
                     let db = base.as_ref().map_or(f64::NAN, |b| {
-                        (fit.calibration.hard_iron() - b.calibration.hard_iron()).norm()
+                        (fit.calibration.hard_iron_vector() - b.calibration.hard_iron_vector())
+                            .norm()
                             / b.calibration.field_strength()
                     });
                     let _ = writeln!(

@@ -154,14 +154,14 @@ fn main() -> ExitCode {
 }
 
 /// Median time (us) of the core's moments pass alone
-/// (`moments::Moments::accumulate`, the second pass of every method) on the
+/// (`Moments::accumulate`, through the core's unstable benchmark path; the second pass of every method) on the
 /// first run of scenario B, over 201 calls: the part of the shared LS9 fit
 /// that dominates ADC2's time.
 fn moments_pass_micros() -> f64 {
     use host_tests::scenarios::Truth;
-    use mag_cal_core::moments::Moments;
-    use mag_cal_core::nalgebra::Vector3;
-    use mag_cal_core::normalize::Normalization;
+    use mag_cal_core::__unstable::Moments;
+    use mag_cal_core::__unstable::Normalization;
+    use nalgebra::Vector3;
     let y = SCENARIOS[1].generate(&Truth::paper(), 0).samples;
     let n = y.len() as f64;
     let c = y

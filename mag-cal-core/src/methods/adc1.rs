@@ -122,18 +122,9 @@ fn weighted_solve<T: Real>(
     bfgs(&objective, SVector::zeros(), &opts)
 }
 
-/// ADC1 from the LS fit: artificial data (one pass), the noise weight, the
-/// weighted solve, then the canonical `W'`.
-pub fn run<T: Real, S: Sample>(
-    samples: &[S],
-    norm: &Normalization<T>,
-    ls: &Ellipsoid<T>,
-    config: &Config,
-) -> Result<Estimate<T>, Error> {
-    step(samples, norm, ls, config, &Weights::PLAIN)
-}
-
-/// [`run`] with 0/1 weights on the artificial-data pass (as ADC2's).
+/// ADC1 from the LS fit: artificial data (one pass, with the 0/1 weights
+/// as ADC2's), the noise weight, the weighted solve, then the canonical
+/// `W'`.
 pub(crate) fn step<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,

@@ -101,17 +101,7 @@ fn change<T: Real>(a: &State<T>, b: &State<T>) -> T {
     dm * rho * rho + (bb - ba).amax() / rho
 }
 
-/// Iterated ADC2 from the LS fit.
-pub fn run<T: Real, S: Sample>(
-    samples: &[S],
-    norm: &Normalization<T>,
-    ls: &Ellipsoid<T>,
-    config: &Config,
-) -> Result<Estimate<T>, Error> {
-    step(samples, norm, ls, config, &Weights::PLAIN)
-}
-
-/// [`run`] with 0/1 weights. Each pass's weights come from the residuals
+/// Iterated ADC2 from the LS fit, with 0/1 weights. Each pass's weights come from the residuals
 /// of the pass before (the first pass's from `weights`); plain weights
 /// (no sigma) stay plain.
 pub(crate) fn step<T: Real, S: Sample>(

@@ -27,8 +27,9 @@ pub enum Method {
     /// The algebraic least-squares ellipsoid fit alone (step 1).
     Ls,
     /// The paper's ADC1: artificial data, then a noise-weighted re-estimate.
-    /// Its minimiser equals ADC2's for every noise covariance (see
-    /// [`adc1`]); it is kept to reproduce the paper and to show that.
+    /// Its minimiser equals ADC2's for every noise covariance (both
+    /// regress on the same `[h_i, 1]`); it is kept to reproduce the paper
+    /// and to show that.
     Adc1,
     /// One-step artificial data creation with quasi-Newton re-estimation
     /// (the paper's ADC2, steps 1-5).
@@ -211,7 +212,7 @@ pub struct Estimate<T: Real> {
     /// computed from them, and the final pass sums the radial error alone.
     /// They differ from the final calibration's directions by at most 2 %
     /// on the design document's scenarios (0.05 % in A).
-    pub directions: Option<DirectionSums<T>>,
+    pub(crate) directions: Option<DirectionSums<T>>,
     /// Robust standard deviation `1.4826 median||u| - 1|` of the radial
     /// residuals in the method's last artificial-data pass (under that
     /// pass's start), over the rows its gate passed; `None` for methods

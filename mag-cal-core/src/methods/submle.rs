@@ -63,6 +63,7 @@ pub struct SubMleObjective<'a, T: Real, S: Sample> {
 
 impl<'a, T: Real, S: Sample> SubMleObjective<'a, T, S> {
     /// The objective over `samples`.
+    #[cfg(test)]
     pub fn new(samples: &'a [S], norm: &'a Normalization<T>) -> Self {
         Self::gated(samples, norm, Gate::PLAIN)
     }
@@ -111,16 +112,6 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let da = a * dm * two;
         (cost, pack(&da, &db))
     }
-}
-
-/// subMLE from the LS fit.
-pub fn run<T: Real, S: Sample>(
-    samples: &[S],
-    norm: &Normalization<T>,
-    ls: &Ellipsoid<T>,
-    config: &Config,
-) -> Result<Estimate<T>, Error> {
-    step(samples, norm, ls, config, &Weights::PLAIN)
 }
 
 /// [`run`] over the rows the weights' gate passes (the drop rules and the
