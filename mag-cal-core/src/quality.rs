@@ -805,6 +805,42 @@ impl Warning {
     }
 }
 
+/// A sentence for people: what the warning means and what to do.
+impl core::fmt::Display for Warning {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Warning::PassCap => {
+                "iterated ADC2 stopped at its pass cap: the coverage is weak; turn the sensor through more orientations"
+            }
+            Warning::NonFiniteDropped => {
+                "some readings were not finite numbers, or too large, and were skipped"
+            }
+            Warning::FewSamples => "few readings: collect more for a reliable calibration",
+            Warning::LowSpread => {
+                "the readings spread little against the given noise: the field is weak or the sensor barely turned"
+            }
+            Warning::NearlyPlanar => {
+                "the readings lie close to a plane: turn the sensor about more axes"
+            }
+            Warning::WeakQuadric => {
+                "another quadric fits nearly as well as the ellipsoid: cover more directions"
+            }
+            Warning::WeakCoverage => {
+                "part of the sphere of directions was not visited: the calibration is weaker there"
+            }
+            Warning::RowsDropped => {
+                "rows that cannot be readings (zeros, saturated axes, repeated rows) were dropped"
+            }
+            Warning::OutliersRejected => {
+                "readings far from the others or off the ellipsoid (a magnet, a glitch) were left out"
+            }
+            Warning::HighFitError => {
+                "the readings scatter widely about the ellipsoid: noisy data or nearby disturbances"
+            }
+        })
+    }
+}
+
 /// A set of [`Warning`]s (a bit set: `Copy`, no allocation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

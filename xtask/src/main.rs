@@ -6,7 +6,7 @@
 //! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
-//! | `test` | setup, then every test: host tests, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
+//! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //!
@@ -178,6 +178,7 @@ fn qemu_faults() -> Result<(), String> {
 /// the fault run.
 fn test_all() -> Result<(), String> {
     run(&root(), "cargo", &["test", "--workspace", "--locked"])?;
+    examples()?;
     package_check()?;
     run_on_qemu("ontarget")?;
     let fw = firmware_dir();
@@ -189,6 +190,24 @@ fn test_all() -> Result<(), String> {
     let proof = root().join("no-panic-check").join("check.sh");
     let proof = proof.to_str().ok_or("check.sh: path is not UTF-8")?;
     run(&root(), "bash", &[proof, "--no-list"])
+}
+
+/// The core's examples, as a user runs them (the log is a shared real
+/// recording).
+fn examples() -> Result<(), String> {
+    let root = root();
+    let log = root.join("../shared/data/real/icm20948_mag_300.csv");
+    let example = |name: &str, args: &[&str]| {
+        let mut all = vec!["run", "--locked", "-p", "mag-cal-core", "--example", name];
+        if !args.is_empty() {
+            all.push("--");
+            all.extend_from_slice(args);
+        }
+        run(&root, "cargo", &all)
+    };
+    example("calibrate_log", &[path_str(&log)?])?;
+    example("heading", &[])?;
+    example("persist", &[])
 }
 
 /// The value of the first `key = "value"` line after the line `section` of
