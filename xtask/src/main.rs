@@ -181,6 +181,8 @@ fn test_all() -> Result<(), String> {
     examples()?;
     package_check()?;
     run_on_qemu("ontarget")?;
+    // The board example to copy, on the emulated board.
+    run_on_qemu("compass")?;
     let fw = firmware_dir();
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
     qemu_demo()?;
