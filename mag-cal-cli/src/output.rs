@@ -224,10 +224,11 @@ mod tests {
             robust: true,
             samples_used: 300,
             samples_dropped: 2,
-            drops: DropCounts(Drops {
-                non_finite: 1,
-                repeated: 1,
-                ..Drops::default()
+            drops: DropCounts({
+                let mut drops = Drops::default();
+                drops.non_finite = 1;
+                drops.repeated = 1;
+                drops
             }),
             screened: 0,
             rejected: 3,

@@ -231,6 +231,7 @@ pub enum Offer {
 /// How far the collection is, as reported by [`Collector::progress`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub struct Progress {
     /// Samples stored.
     pub samples: usize,

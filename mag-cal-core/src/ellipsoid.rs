@@ -12,6 +12,7 @@ use crate::{Error, Real};
 /// Which algebraic least-squares solve turns the moments into a quadric.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum LsVariant {
     /// Constant coefficient fixed to `-1`, a 9x9 Cholesky solve. The
     /// cheapest, and the best start on partial coverage; legitimate because

@@ -150,9 +150,11 @@
 //! variant.
 //!
 //! # Features
-//! - `defmt`: `defmt::Format` for [`Error`], [`Method`], [`LsVariant`],
-//!   [`Warning`], [`Warnings`], [`Drops`], [`Rule`], [`SampleClass`],
-//!   [`Thresholds`] and the collector's `Offer` and `Progress`.
+//! - `defmt`: `defmt::Format` for [`Calibration`], [`Fit`], [`Report`],
+//!   [`Quality`], [`Selection`] (in `f32` and `f64`), [`Error`],
+//!   [`Method`], [`LsVariant`], [`Warning`], [`Warnings`] (by name),
+//!   [`Drops`], [`Rule`], [`SampleClass`], [`Thresholds`] and the
+//!   collector's `Offer` and `Progress`.
 //! - `nalgebra`: conversions for host code that computes with `nalgebra`
 //!   0.35 (`Calibration::hard_iron_vector` and the like, [`Sample`] for
 //!   `nalgebra::Vector3`). Without it no `nalgebra` type is in the API.
@@ -182,6 +184,8 @@ pub mod align;
 mod artificial;
 mod calibration;
 pub mod collector;
+#[cfg(feature = "defmt")]
+mod defmt_impls;
 mod ellipsoid;
 mod error;
 pub mod heading;
@@ -302,6 +306,7 @@ impl Default for Config {
 /// `samples_used + samples_dropped + screened + rejected` is the input's
 /// length.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Report<T: Real> {
     /// The method that ran.
     pub method: Method,
@@ -339,6 +344,7 @@ pub struct Report<T: Real> {
 
 /// A calibration and its report.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Fit<T: Real> {
     /// The calibration.
     pub calibration: Calibration<T>,

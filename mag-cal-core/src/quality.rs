@@ -18,6 +18,7 @@ use crate::{Error, Figure, Real};
 
 /// The figures behind the checks, for the report.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Quality<T: Real> {
     /// `lambda_min / lambda_max` of the 3x3 covariance of the samples: 1/3
     /// to 1 for a sphere seen from all sides, 0 for a plane.
@@ -841,9 +842,9 @@ impl core::fmt::Display for Warning {
     }
 }
 
-/// A set of [`Warning`]s (a bit set: `Copy`, no allocation).
+/// A set of [`Warning`]s (a bit set: `Copy`, no allocation). With the
+/// `defmt` feature it is logged by the warnings' names.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Warnings(u16);
 
 impl Warnings {

@@ -28,6 +28,7 @@ use crate::Real;
 /// Rows dropped before the fit, by rule.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub struct Drops {
     /// Rows with a NaN or infinite component.
     pub non_finite: usize,
@@ -58,6 +59,18 @@ impl Drops {
         self.zero + self.rails + self.repeated + self.clipped
     }
 
+    /// Rows dropped by `rule`.
+    pub const fn by(&self, rule: Rule) -> usize {
+        match rule {
+            Rule::NonFinite => self.non_finite,
+            Rule::Overflow => self.overflow,
+            Rule::Zero => self.zero,
+            Rule::Rails => self.rails,
+            Rule::Repeated => self.repeated,
+            Rule::Clipped => self.clipped,
+        }
+    }
+
     fn count(&mut self, rule: Rule) {
         let c = match rule {
             Rule::NonFinite => &mut self.non_finite,
@@ -74,6 +87,7 @@ impl Drops {
 /// The rule that dropped a row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Rule {
     /// A NaN or infinite component.
     NonFinite,
@@ -90,6 +104,16 @@ pub enum Rule {
 }
 
 impl Rule {
+    /// Every rule, in the order of [`Drops`]' fields.
+    pub const ALL: [Rule; 6] = [
+        Rule::NonFinite,
+        Rule::Overflow,
+        Rule::Zero,
+        Rule::Rails,
+        Rule::Repeated,
+        Rule::Clipped,
+    ];
+
     /// Short snake-case name, as used in the CLI's JSON.
     pub const fn name(self) -> &'static str {
         match self {

@@ -92,14 +92,7 @@ fn main() -> ! {
             }
         }
     };
-    let [bx, by, bz] = cal.hard_iron();
-    info!(
-        "b = [{=f32}, {=f32}, {=f32}] counts, field {=f32} counts",
-        bx,
-        by,
-        bz,
-        cal.field_strength()
-    );
+    info!("{}", cal);
 
     // Headings of the calibrated readings, averaged on the circle.
     let mut smoother: HeadingSmoother<f32, DEFAULT_WINDOW> = HeadingSmoother::new();
