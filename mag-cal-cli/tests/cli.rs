@@ -1829,3 +1829,39 @@ fn plot_marks_the_rows_the_fit_did_not_use() {
         assert!(v.is_finite(), "{n}");
     }
 }
+
+/// `magcal fit --format json` is also the core's serialised calibration
+/// (feature `serde`): a host tool reads it with `serde_json` directly, to
+/// the same numbers.
+#[test]
+fn fit_json_deserialises_as_a_core_calibration() {
+    let run = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    );
+    let v = run.json();
+    let cal: mag_cal_core::Calibration<f64> =
+        serde_json::from_str(&run.stdout).expect("a calibration");
+    let close = |a: f64, b: &Value| {
+        let b = b.as_f64().expect("a number");
+        (a - b).abs() <= 1e-12 * b.abs().max(1e-3)
+    };
+    for (i, b) in cal.hard_iron().iter().enumerate() {
+        assert!(
+            close(*b, &v["hard_iron"][i]),
+            "b[{i}] {b} vs {}",
+            v["hard_iron"][i]
+        );
+    }
+    for (i, row) in cal.soft_iron().iter().enumerate() {
+        for (j, w) in row.iter().enumerate() {
+            assert!(close(*w, &v["soft_iron"][i][j]), "W[{i}][{j}]");
+        }
+    }
+    assert!(close(cal.field_strength(), &v["field_strength"]));
+    // Serialised again: the same three fields.
+    let back: Value = serde_json::to_value(cal).expect("serialises");
+    for key in ["hard_iron", "soft_iron", "field_strength"] {
+        assert!(back.get(key).is_some(), "{key} in {back}");
+    }
+}

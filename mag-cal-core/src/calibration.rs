@@ -16,6 +16,15 @@ use crate::{Error, Real, Sample};
 /// Constructed only through a fit or [`Calibration::new`], both of which
 /// validate, so the accessors never fail.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(
+        into = "Stored<T>",
+        try_from = "Stored<T>",
+        bound = "T: Real + serde::Serialize + serde::de::DeserializeOwned"
+    )
+)]
 pub struct Calibration<T: Real> {
     hard_iron: Vector3<T>,
     soft_iron: Matrix3<T>,
@@ -193,5 +202,38 @@ impl<T: Real> Calibration<T> {
     /// [`Calibration::apply_scaled`] as a vector.
     pub fn apply_scaled_vector<S: Sample>(&self, raw: S) -> Vector3<T> {
         self.map(raw.xyz()) * self.field_strength
+    }
+}
+
+/// The serialised form (feature `serde`): `b` and `W` by rows, and the
+/// field strength, which is recomputed (and so need not be given) when
+/// read back.
+#[cfg(feature = "serde")]
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(bound = "T: serde::Serialize + serde::de::DeserializeOwned")]
+struct Stored<T> {
+    hard_iron: [T; 3],
+    soft_iron: [[T; 3]; 3],
+    #[serde(default)]
+    field_strength: Option<T>,
+}
+
+#[cfg(feature = "serde")]
+impl<T: Real> From<Calibration<T>> for Stored<T> {
+    fn from(c: Calibration<T>) -> Self {
+        Self {
+            hard_iron: c.hard_iron(),
+            soft_iron: c.soft_iron(),
+            field_strength: Some(c.field_strength()),
+        }
+    }
+}
+
+#[cfg(feature = "serde")]
+impl<T: Real> TryFrom<Stored<T>> for Calibration<T> {
+    type Error = Error;
+
+    fn try_from(s: Stored<T>) -> Result<Self, Error> {
+        Calibration::new(s.hard_iron, s.soft_iron)
     }
 }

@@ -155,6 +155,10 @@
 //!   [`Method`], [`LsVariant`], [`Warning`], [`Warnings`] (by name),
 //!   [`Drops`], [`Rule`], [`SampleClass`], [`Thresholds`] and the
 //!   collector's `Offer` and `Progress`.
+//! - `serde`: `Serialize` and `Deserialize` for [`Calibration`] as
+//!   `{"hard_iron": [..], "soft_iron": [[..], [..], [..]], "field_strength": ..}`
+//!   (`W` by rows; the field strength is recomputed on reading, which
+//!   validates as [`Calibration::new`] does).
 //! - `nalgebra`: conversions for host code that computes with `nalgebra`
 //!   0.35 (`Calibration::hard_iron_vector` and the like, [`Sample`] for
 //!   `nalgebra::Vector3`). Without it no `nalgebra` type is in the API.
