@@ -7,6 +7,9 @@
 #                BENCH <name> n=<n> instructions=<count>
 #   footprint  flash, stack and RAM (src/bin/footprint.rs):
 #                FOOTPRINT <name> flash=<bytes> stack=<bytes> ram_per_sample=<bytes>
+#              and the flash of a method chosen at run time with the core's
+#              method features (none, or one optional method added):
+#                FOOTPRINT runtime-method features=<feature> flash=<bytes>
 #   all        both (the default)
 #   --verify   with `bench`/`all`: run the bench a second time single-stepped
 #              with QEMU's exec log, count every instruction between the
@@ -204,6 +207,18 @@ run_footprint() {
     echo "FOOTPRINT ls9+adc2 flash=$((flash[ls9+adc2] - flash[baseline])) stack=$(stack_of adc2) ram_per_sample=$ram_per_sample"
     echo "FOOTPRINT all-methods flash=$((flash[all] - flash[baseline])) stack=$max_stack ram_per_sample=$ram_per_sample"
     rm -f "$log"
+    # The core's method features, with the method chosen at run time:
+    # LS, LS9 and ADC2 alone, then each optional method or LS variant
+    # added (the `all` build, every feature).
+    local feature f
+    for feature in none adc1 adc2-iterated submle svd10 li-griffiths; do
+        local features=qemu-base
+        [ "$feature" = none ] || features="qemu-base,mag-cal-core/$feature"
+        MAG_CAL_FOOTPRINT=all cargo build --release --locked --no-default-features \
+            --features "$features" --bin footprint >&2
+        f=$(flash_of "$out/footprint")
+        echo "FOOTPRINT runtime-method features=$feature flash=$((f - flash[baseline]))"
+    done
 }
 
 case $what in

@@ -27,11 +27,11 @@
 
 #![no_std]
 
-#[cfg(all(feature = "board", feature = "qemu"))]
+#[cfg(all(feature = "board", feature = "qemu-base"))]
 compile_error!(
     "choose one of the features `board` and `qemu` (use --no-default-features for qemu)"
 );
-#[cfg(not(any(feature = "board", feature = "qemu")))]
+#[cfg(not(any(feature = "board", feature = "qemu-base")))]
 compile_error!("choose one of the features `board` (default) and `qemu`");
 
 pub mod faults;
@@ -43,13 +43,13 @@ pub mod board;
 #[cfg(feature = "board")]
 pub use board as platform;
 
-#[cfg(feature = "qemu")]
+#[cfg(feature = "qemu-base")]
 pub mod sim;
-#[cfg(feature = "qemu")]
+#[cfg(feature = "qemu-base")]
 pub mod sim_sensor;
-#[cfg(feature = "qemu")]
+#[cfg(feature = "qemu-base")]
 use defmt_semihosting as _;
-#[cfg(feature = "qemu")]
+#[cfg(feature = "qemu-base")]
 pub use sim_sensor as platform;
 
 use nalgebra::{Matrix3, Vector3};

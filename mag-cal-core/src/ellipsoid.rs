@@ -43,6 +43,16 @@ impl LsVariant {
             LsVariant::LiGriffiths => "lg10",
         }
     }
+
+    /// The cargo feature that compiles the variant in (`""` for LS9, always
+    /// there).
+    pub const fn feature(self) -> &'static str {
+        match self {
+            LsVariant::Ls9 => "",
+            LsVariant::Svd10 => "svd10",
+            LsVariant::LiGriffiths => "li-griffiths",
+        }
+    }
 }
 
 /// An ellipsoid `(x - c)^T M (x - c) = 1`, in normalised coordinates.
@@ -63,20 +73,26 @@ pub fn fit_scatter<T: Real>(
     s: &SMatrix<T, 10, 10>,
     variant: LsVariant,
 ) -> Result<Ellipsoid<T>, Error> {
-    fit_with(s, solver(variant))
+    fit_with(s, solver(variant)?)
 }
 
 /// A variant's solve: quadric coefficients from the scatter.
 pub type Solve<T> = fn(&SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error>;
 
 /// The solve of a variant (inlined, so that a constant variant links only
-/// its own solve).
+/// its own solve), or [`Error::NotEnabled`] when its cargo feature is off.
 #[inline(always)]
-pub fn solver<T: Real>(variant: LsVariant) -> Solve<T> {
+pub fn solver<T: Real>(variant: LsVariant) -> Result<Solve<T>, Error> {
     match variant {
-        LsVariant::Ls9 => ls9,
-        LsVariant::Svd10 => svd10,
-        LsVariant::LiGriffiths => li_griffiths,
+        LsVariant::Ls9 => Ok(ls9),
+        #[cfg(feature = "svd10")]
+        LsVariant::Svd10 => Ok(svd10),
+        #[cfg(feature = "li-griffiths")]
+        LsVariant::LiGriffiths => Ok(li_griffiths),
+        #[allow(unreachable_patterns)] // with every variant enabled
+        other => Err(Error::NotEnabled {
+            feature: other.feature(),
+        }),
     }
 }
 
@@ -116,6 +132,7 @@ fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 
 /// `v` = eigenvector of the smallest eigenvalue of `S`. Out of line, as
 /// [`ls9`].
+#[cfg(feature = "svd10")]
 #[inline(never)]
 fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let eig = sym_eigen(&to_array(s))?;
@@ -134,6 +151,7 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// the solution by about that relative amount. (Always adding the ridge cost
 /// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
 #[allow(clippy::needless_range_loop)] // matrix notation, as in linalg
+#[cfg(feature = "li-griffiths")]
 #[inline(never)] // as ls9
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);

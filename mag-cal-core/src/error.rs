@@ -38,6 +38,12 @@ pub enum Error {
     /// Two inputs that must pair up element by element have different
     /// lengths (e.g. calibrated and reference vectors for alignment).
     MismatchedLengths,
+    /// The configuration asks for a method or LS variant that this build
+    /// leaves out: enable its cargo feature.
+    NotEnabled {
+        /// The cargo feature of `mag-cal-core` that compiles it in.
+        feature: &'static str,
+    },
     /// A given noise covariance is not finite, symmetric and positive
     /// definite.
     InvalidNoiseCovariance,
@@ -118,6 +124,10 @@ impl fmt::Display for Error {
                 write!(f, "solver did not converge within {iterations} iterations")
             }
             Error::MismatchedLengths => f.write_str("paired inputs have different lengths"),
+            Error::NotEnabled { feature } => write!(
+                f,
+                "this build of mag-cal-core leaves the method out: enable its cargo feature `{feature}`"
+            ),
             Error::InvalidNoiseCovariance => {
                 f.write_str("noise covariance is not finite, symmetric and positive definite")
             }

@@ -150,6 +150,12 @@
 //! variant.
 //!
 //! # Features
+//! - `all-methods` (default): `adc1`, `adc2-iterated`, `submle` (the
+//!   methods) and `svd10`, `li-griffiths` (the LS variants). LS, LS9 and
+//!   ADC2 are always there. Firmware that picks the method at run time
+//!   links only the enabled ones (`default-features = false`); asking for
+//!   one left out is [`Error::NotEnabled`]. A constant [`Config`] links
+//!   only its own method either way.
 //! - `defmt`: `defmt::Format` for [`Calibration`], [`Fit`], [`Report`],
 //!   [`Quality`], [`Selection`] (in `f32` and `f64`), [`Error`],
 //!   [`Method`], [`LsVariant`], [`Warning`], [`Warnings`] (by name),
@@ -183,6 +189,9 @@
 // `!(x > 0)` is deliberate throughout: unlike `x <= 0` it is also true for
 // NaN, so a NaN never passes a validity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Without every method, the helpers only the optional methods use (the
+// Anderson step, the dense solves, eigenvectors) are dead code.
+#![cfg_attr(not(feature = "all-methods"), allow(dead_code, unused_imports))]
 
 pub mod align;
 mod artificial;
@@ -373,18 +382,29 @@ pub struct Fit<T: Real> {
 /// small wrapper inlined at the call site; the pipeline takes them as
 /// function pointers. With a constant [`Config`] (e.g. `Config::default()`)
 /// the optimiser sees which are used and links only those: LS9 + ADC2
-/// alone is what firmware pays for (`docs/benchmarks.md`). A `Config`
-/// chosen at run time links every method.
+/// alone is what firmware pays for. A `Config` chosen at run time links
+/// every method its cargo features enable (see [Features](crate#features)):
+/// a method or LS variant whose feature is off is refused with
+/// [`Error::NotEnabled`].
 #[inline(always)]
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
     let step: methods::Step<T, S> = match config.method {
         Method::Ls => methods::ls_only,
+        #[cfg(feature = "adc1")]
         Method::Adc1 => methods::adc1::step,
         Method::Adc2 => methods::adc2::step,
+        #[cfg(feature = "adc2-iterated")]
         Method::Adc2Iterated => methods::iterated::step,
+        #[cfg(feature = "submle")]
         Method::SubMle => methods::submle::step,
+        #[allow(unreachable_patterns)] // with every method enabled
+        other => {
+            return Err(Error::NotEnabled {
+                feature: other.feature(),
+            })
+        }
     };
-    pipeline(samples, config, ellipsoid::solver(config.ls), step)
+    pipeline(samples, config, ellipsoid::solver(config.ls)?, step)
 }
 
 /// A plain fit is taken as the robust one when no row's residual exceeds

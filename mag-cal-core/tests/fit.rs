@@ -170,3 +170,47 @@ fn soft_iron_is_exactly_symmetric() {
         }
     }
 }
+
+/// A method or LS variant whose cargo feature is off is refused by the
+/// feature's name, and one that is on runs (`cargo xtask test` also runs
+/// this with `--no-default-features --features adc1`).
+#[test]
+fn a_method_left_out_is_refused_by_its_feature() {
+    let (t, b) = truth(300.0);
+    let y = samples(&t, &b, 300);
+    for method in Method::ALL {
+        let config = Config {
+            method,
+            ..Config::default()
+        };
+        let r = calibrate::<f64, _>(&y, &config);
+        if method.is_enabled() {
+            assert!(r.is_ok(), "{method:?}: {r:?}");
+        } else {
+            let feature = method.feature();
+            assert_eq!(r.unwrap_err(), Error::NotEnabled { feature });
+            assert!(Error::NotEnabled { feature }.to_string().contains(feature));
+        }
+    }
+    for ls in [LsVariant::Svd10, LsVariant::LiGriffiths] {
+        let config = Config {
+            ls,
+            ..Config::default()
+        };
+        let r = calibrate::<f64, _>(&y, &config);
+        let enabled = match ls {
+            LsVariant::Svd10 => cfg!(feature = "svd10"),
+            _ => cfg!(feature = "li-griffiths"),
+        };
+        if enabled {
+            assert!(r.is_ok(), "{ls:?}: {r:?}");
+        } else {
+            assert_eq!(
+                r.unwrap_err(),
+                Error::NotEnabled {
+                    feature: ls.feature()
+                }
+            );
+        }
+    }
+}

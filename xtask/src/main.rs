@@ -178,6 +178,24 @@ fn qemu_faults() -> Result<(), String> {
 /// the fault run.
 fn test_all() -> Result<(), String> {
     run(&root(), "cargo", &["test", "--workspace", "--locked"])?;
+    // A build with one optional method: the others are refused by name.
+    run(
+        &root(),
+        "cargo",
+        &[
+            "test",
+            "--locked",
+            "-p",
+            "mag-cal-core",
+            "--no-default-features",
+            "--features",
+            "adc1",
+            "--test",
+            "fit",
+            "--",
+            "a_method_left_out",
+        ],
+    )?;
     examples()?;
     package_check()?;
     run_on_qemu("ontarget")?;

@@ -14,9 +14,12 @@ use crate::sample::Sample;
 use crate::screen::MAD_TO_SIGMA;
 use crate::{Config, Error, Real, Warnings};
 
+#[cfg(feature = "adc1")]
 pub mod adc1;
 pub mod adc2;
+#[cfg(feature = "adc2-iterated")]
 pub mod iterated;
+#[cfg(feature = "submle")]
 pub mod submle;
 
 /// Which method produced a calibration.
@@ -72,6 +75,27 @@ impl Method {
     /// ([`crate::quality::REFUSE_LACK_OF_FIT`]).
     pub const fn fits_radial_residual(self) -> bool {
         matches!(self, Method::Adc1 | Method::Adc2 | Method::Adc2Iterated)
+    }
+
+    /// The cargo feature that compiles the method in (`""` for the ones
+    /// always there: LS and ADC2).
+    pub const fn feature(self) -> &'static str {
+        match self {
+            Method::Ls | Method::Adc2 => "",
+            Method::Adc1 => "adc1",
+            Method::Adc2Iterated => "adc2-iterated",
+            Method::SubMle => "submle",
+        }
+    }
+
+    /// Whether this build has the method ([`Method::feature`] enabled).
+    pub const fn is_enabled(self) -> bool {
+        match self {
+            Method::Ls | Method::Adc2 => true,
+            Method::Adc1 => cfg!(feature = "adc1"),
+            Method::Adc2Iterated => cfg!(feature = "adc2-iterated"),
+            Method::SubMle => cfg!(feature = "submle"),
+        }
     }
 
     /// The method named `name` (see [`Method::name`]).
