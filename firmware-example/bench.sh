@@ -211,7 +211,7 @@ run_footprint() {
     # LS, LS9 and ADC2 alone, then each optional method or LS variant
     # added (the `all` build, every feature).
     local feature f
-    for feature in none adc1 adc2-iterated submle svd10 li-griffiths; do
+    for feature in none adc1 adc2-iter submle svd10 lg10; do
         local features=qemu-base
         [ "$feature" = none ] || features="qemu-base,mag-cal-core/$feature"
         MAG_CAL_FOOTPRINT=all cargo build --release --locked --no-default-features \

@@ -23,7 +23,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::linalg::{from_rows, rows};
+use crate::linalg::{dot, from_rows, rows};
 use crate::moments::BLOCK;
 use crate::{Calibration, Error, Real, Sample};
 
@@ -145,12 +145,6 @@ fn procrustes_matrix<T: Real>(
 /// indices only, so that no bounds-check or nalgebra assertion survives
 /// optimisation (see `no-panic-check/`).
 type Columns<T> = [[T; 3]; 3];
-
-/// `x . y`.
-#[inline(always)]
-fn dot<T: Real>(x: &[T; 3], y: &[T; 3]) -> T {
-    x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
-}
 
 /// `|x|` (the square root of the squared norm, as nalgebra's `norm`).
 #[inline(always)]

@@ -151,6 +151,7 @@
 //! assert_eq!((p.samples, p.ready), (1, false));
 //! ```
 
+use crate::linalg::dot;
 use crate::sample::Sample;
 
 /// Default minimum angle between consecutive kept samples, degrees (see the
@@ -289,7 +290,7 @@ impl CentreFit {
             f.origin = y;
         }
         let x = sub(y, f.origin);
-        let q = dot(x, x);
+        let q = dot(&x, &x);
         f.n += 1.0;
         let w = 1.0 / f.n;
         let dx = sub(x, f.mean);
@@ -334,7 +335,7 @@ impl CentreFit {
     /// the origin.
     fn radius_sq(&self, centre: [f32; 3]) -> f32 {
         let c = sub(centre, self.origin);
-        self.mean_q - 2.0 * dot(c, self.mean) + dot(c, c)
+        self.mean_q - 2.0 * dot(&c, &self.mean) + dot(&c, &c)
     }
 
     /// The centre estimate, sensor units.
@@ -394,15 +395,11 @@ fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// Unit direction of `y` from `centre`, or `None` when `y` is on the centre
 /// (or the distance overflows).
 fn direction(y: [f32; 3], centre: [f32; 3]) -> Option<[f32; 3]> {
     let v = sub(y, centre);
-    let r = libm::sqrtf(dot(v, v));
+    let r = libm::sqrtf(dot(&v, &v));
     if !(r > 0.0) || !r.is_finite() {
         return None;
     }
@@ -416,7 +413,7 @@ fn direction(y: [f32; 3], centre: [f32; 3]) -> Option<[f32; 3]> {
 /// octant of longitude from signs and `|x|` against `|y|` (no `atan2`).
 fn cell(v: [f32; 3]) -> Option<usize> {
     let [x, y, z] = v;
-    let r2 = dot(v, v);
+    let r2 = dot(&v, &v);
     if !(r2 > 0.0) || !r2.is_finite() {
         return None;
     }
@@ -569,7 +566,7 @@ impl<S: Sample, const N: usize> Collector<S, N> {
         if self.samples.len() >= OUTLIER_MIN_SAMPLES {
             let d = sub(y, self.centre);
             let r_sq = self.fit.radius_sq(self.centre);
-            if dot(d, d) > OUTLIER_RADII * OUTLIER_RADII * r_sq {
+            if dot(&d, &d) > OUTLIER_RADII * OUTLIER_RADII * r_sq {
                 return Offer::Outlier;
             }
         }
@@ -587,7 +584,7 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             (Some(_), None) => true,
             (Some(u), Some(v)) => {
                 let d = sub(u, v);
-                let chord_sq = dot(d, d);
+                let chord_sq = dot(&d, &d);
                 chord_sq > 0.0 && chord_sq >= self.min_chord_sq
             }
         };

@@ -50,7 +50,7 @@ impl LsVariant {
         match self {
             LsVariant::Ls9 => "",
             LsVariant::Svd10 => "svd10",
-            LsVariant::LiGriffiths => "li-griffiths",
+            LsVariant::LiGriffiths => "lg10",
         }
     }
 }
@@ -87,7 +87,7 @@ pub fn solver<T: Real>(variant: LsVariant) -> Result<Solve<T>, Error> {
         LsVariant::Ls9 => Ok(ls9),
         #[cfg(feature = "svd10")]
         LsVariant::Svd10 => Ok(svd10),
-        #[cfg(feature = "li-griffiths")]
+        #[cfg(feature = "lg10")]
         LsVariant::LiGriffiths => Ok(li_griffiths),
         #[allow(unreachable_patterns)] // with every variant enabled
         other => Err(Error::NotEnabled {
@@ -151,7 +151,7 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 /// the solution by about that relative amount. (Always adding the ridge cost
 /// f32 fits on noisy data 3e-5 relative, against 1e-6 without it.)
 #[allow(clippy::needless_range_loop)] // matrix notation, as in linalg
-#[cfg(feature = "li-griffiths")]
+#[cfg(feature = "lg10")]
 #[inline(never)] // as ls9
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     let s = to_array(s);

@@ -150,8 +150,8 @@
 //! variant.
 //!
 //! # Features
-//! - `all-methods` (default): `adc1`, `adc2-iterated`, `submle` (the
-//!   methods) and `svd10`, `li-griffiths` (the LS variants). LS, LS9 and
+//! - `all-methods` (default): `adc1`, `adc2-iter`, `submle` (the
+//!   methods) and `svd10`, `lg10` (the LS variants). LS, LS9 and
 //!   ADC2 are always there. Firmware that picks the method at run time
 //!   links only the enabled ones (`default-features = false`); asking for
 //!   one left out is [`Error::NotEnabled`]. A constant [`Config`] links
@@ -393,7 +393,7 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
         #[cfg(feature = "adc1")]
         Method::Adc1 => methods::adc1::step,
         Method::Adc2 => methods::adc2::step,
-        #[cfg(feature = "adc2-iterated")]
+        #[cfg(feature = "adc2-iter")]
         Method::Adc2Iterated => methods::iterated::step,
         #[cfg(feature = "submle")]
         Method::SubMle => methods::submle::step,

@@ -39,6 +39,13 @@ pub(crate) fn from_array<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N,
     SMatrix::from_data(ArrayStorage(a))
 }
 
+/// `a^T b`, summed in index order (`a[0] b[0] + a[1] b[1] + ...`): the one
+/// dot product of the crate's arrays.
+#[inline]
+pub(crate) fn dot<T: Real, const N: usize>(a: &[T; N], b: &[T; N]) -> T {
+    a.iter().zip(b).fold(T::zero(), |acc, (&p, &q)| acc + p * q)
+}
+
 /// The rows of a 3x3 matrix, `a[row][column]`: the public API's form.
 pub(crate) fn rows<T: Real>(m: &Matrix3<T>) -> [[T; 3]; 3] {
     let c = m.data.0;

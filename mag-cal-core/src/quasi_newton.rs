@@ -22,6 +22,7 @@
 
 use nalgebra::SVector;
 
+use crate::linalg::dot;
 use crate::{Error, Real};
 
 /// A smooth objective over `N` parameters.
@@ -85,12 +86,6 @@ fn arr<T: Real, const N: usize>(v: &SVector<T, N>) -> &[T; N] {
 #[inline(always)]
 fn arr_mut<T: Real, const N: usize>(v: &mut SVector<T, N>) -> &mut [T; N] {
     &mut v.data.0[0]
-}
-
-/// `a^T b`, summed in index order.
-#[inline]
-fn dot<T: Real, const N: usize>(a: &[T; N], b: &[T; N]) -> T {
-    a.iter().zip(b).fold(T::zero(), |acc, (&p, &q)| acc + p * q)
 }
 
 /// `max |a_i|` (NaN components are skipped, as in nalgebra's `amax`).

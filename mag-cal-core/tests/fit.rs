@@ -200,7 +200,7 @@ fn a_method_left_out_is_refused_by_its_feature() {
         let r = calibrate::<f64, _>(&y, &config);
         let enabled = match ls {
             LsVariant::Svd10 => cfg!(feature = "svd10"),
-            _ => cfg!(feature = "li-griffiths"),
+            _ => cfg!(feature = "lg10"),
         };
         if enabled {
             assert!(r.is_ok(), "{ls:?}: {r:?}");

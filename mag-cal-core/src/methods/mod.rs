@@ -17,7 +17,7 @@ use crate::{Config, Error, Real, Warnings};
 #[cfg(feature = "adc1")]
 pub mod adc1;
 pub mod adc2;
-#[cfg(feature = "adc2-iterated")]
+#[cfg(feature = "adc2-iter")]
 pub mod iterated;
 #[cfg(feature = "submle")]
 pub mod submle;
@@ -83,7 +83,7 @@ impl Method {
         match self {
             Method::Ls | Method::Adc2 => "",
             Method::Adc1 => "adc1",
-            Method::Adc2Iterated => "adc2-iterated",
+            Method::Adc2Iterated => "adc2-iter",
             Method::SubMle => "submle",
         }
     }
@@ -93,7 +93,7 @@ impl Method {
         match self {
             Method::Ls | Method::Adc2 => true,
             Method::Adc1 => cfg!(feature = "adc1"),
-            Method::Adc2Iterated => cfg!(feature = "adc2-iterated"),
+            Method::Adc2Iterated => cfg!(feature = "adc2-iter"),
             Method::SubMle => cfg!(feature = "submle"),
         }
     }
