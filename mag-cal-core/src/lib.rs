@@ -394,7 +394,7 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
         Method::Adc1 => methods::adc1::step,
         Method::Adc2 => methods::adc2::step,
         #[cfg(feature = "adc2-iter")]
-        Method::Adc2Iterated => methods::iterated::step,
+        Method::Adc2Iterated => methods::adc2_iter::step,
         #[cfg(feature = "submle")]
         Method::SubMle => methods::submle::step,
         #[allow(unreachable_patterns)] // with every method enabled

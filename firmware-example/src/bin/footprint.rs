@@ -15,7 +15,8 @@
 //!   `baseline` calls nothing, `ls` and `ls9+adc2` call
 //!   `calibrate::<f32, [i16; 3]>` with a constant `Config` (so the other
 //!   methods are dead code and the linker drops them), `all` with a method
-//!   chosen at run time (every method linked). `bench.sh footprint` builds
+//!   and LS variant chosen at run time (every one the core's cargo
+//!   features enable is linked). `bench.sh footprint` builds
 //!   each (release profile: opt-level "s", fat LTO) and reports the
 //!   difference of `.text + .rodata` against `baseline`: the calibration
 //!   code path, including what it pulls in from nalgebra, libm and
@@ -114,9 +115,15 @@ fn flash_build() -> ! {
             // Every method reachable: chosen at run time.
             black_box(Method::Adc2)
         };
+        // With the method, the LS variant is chosen at run time too.
+        let ls = if IS_ALL {
+            black_box(LsVariant::Ls9)
+        } else {
+            LsVariant::Ls9
+        };
         let config = Config {
             method,
-            ls: LsVariant::Ls9,
+            ls,
             ..Config::default()
         };
         let result = calibrate::<f32, [i16; 3]>(samples, &config);

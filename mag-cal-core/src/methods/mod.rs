@@ -18,7 +18,7 @@ use crate::{Config, Error, Real, Warnings};
 pub mod adc1;
 pub mod adc2;
 #[cfg(feature = "adc2-iter")]
-pub mod iterated;
+pub mod adc2_iter;
 #[cfg(feature = "submle")]
 pub mod submle;
 
