@@ -18,7 +18,7 @@
 #              when a figure is off by more than 0.1 %)
 #
 # Lines starting with `#` are comments (iterations, absolute sizes, checks).
-# Needs qemu-system-arm, defmt-print, and `size` (binutils) or `llvm-size`.
+# Needs qemu-system-arm, defmt-print, flip-link (the linker), and `size` (binutils) or `llvm-size`.
 # The instruction counts need `-icount shift=0`: QEMU then advances its
 # virtual clock by 1 ns per instruction, and the 25 MHz SysTick ticks once
 # per 40 instructions (the bench checks that factor and fails without it).

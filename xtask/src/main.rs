@@ -3,7 +3,7 @@
 //!
 //! | command | what |
 //! |---|---|
-//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` (cargo install) |
+//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` and `flip-link` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
 //! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
@@ -19,6 +19,11 @@ use std::process::{exit, Command};
 /// `defmt-print` version installed when missing (matches the `defmt` 1.0
 /// wire format the firmware emits).
 const DEFMT_PRINT_VERSION: &str = "1.2.0";
+
+/// `flip-link` version installed when missing: the firmware's linker
+/// (`firmware-example/.cargo/config.toml`), which puts the stack below the
+/// static data so that an overflow faults instead of corrupting them.
+const FLIP_LINK_VERSION: &str = "0.1.12";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -119,18 +124,17 @@ fn setup() -> Result<(), String> {
         apt(&["update", "-qq"])?;
         apt(&["install", "-y", "-qq", "qemu-system-arm"])?;
     }
-    if !on_path("defmt-print") {
-        run(
-            &root,
-            "cargo",
-            &[
-                "install",
-                "defmt-print",
-                "--locked",
-                "--version",
-                DEFMT_PRINT_VERSION,
-            ],
-        )?;
+    for (tool, version) in [
+        ("defmt-print", DEFMT_PRINT_VERSION),
+        ("flip-link", FLIP_LINK_VERSION),
+    ] {
+        if !on_path(tool) {
+            run(
+                &root,
+                "cargo",
+                &["install", tool, "--locked", "--version", version],
+            )?;
+        }
     }
     Ok(())
 }
