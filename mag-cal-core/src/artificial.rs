@@ -38,7 +38,7 @@
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
 use crate::histogram::LogHistogram;
-use crate::linalg::{from_array, inverse3, larger, to_array};
+use crate::linalg::{columns_of, from_columns, inverse3, larger};
 use crate::moments::BLOCK;
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{check, pieces, Gate, Rules};
@@ -462,7 +462,7 @@ fn add_directions<T: Real>(a: &mut [T; SUMS], dirs: &[[T; 4]]) {
 fn inverse<T: Real>(m: &Matrix3<T>) -> Option<Matrix3<T>> {
     // Storage columns read as rows: the inverse of the transpose, read back
     // the same way, is the inverse.
-    inverse3(&to_array(m)).map(from_array)
+    inverse3(&columns_of(m)).map(from_columns)
 }
 
 #[cfg(test)]

@@ -4,8 +4,8 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 use crate::linalg::{
-    cholesky, cholesky_in_place, cholesky_solve, from_array, min_max, solve3, solve_lower,
-    solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt, to_array,
+    cholesky, cholesky_in_place, cholesky_solve, columns_of, from_columns, min_max, solve3,
+    solve_lower, solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt,
 };
 use crate::{Error, Real};
 
@@ -135,7 +135,7 @@ fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 #[cfg(feature = "svd10")]
 #[inline(never)]
 fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let eig = sym_eigen(&to_array(s))?;
+    let eig = sym_eigen(&columns_of(s))?;
     Ok(SVector::from(eig.min_vector()))
 }
 
@@ -154,7 +154,7 @@ fn svd10<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
 #[cfg(feature = "lg10")]
 #[inline(never)] // as ls9
 fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
-    let s = to_array(s);
+    let s = columns_of(s);
     let zero = T::zero();
     // The blocks: S11 (6x6), S12 (rows 0-5, columns 6-9), S22 (4x4).
     let mut s22 = [[zero; 4]; 4];
@@ -262,7 +262,7 @@ pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> 
     // handles both.
     let c = solve3(&a, &[v[6], v[7], v[8]]).ok_or(Error::NotAnEllipsoid)?;
     let centre = -Vector3::new(c[0], c[1], c[2]);
-    let a = from_array(a);
+    let a = from_columns(a);
     let k = centre.dot(&(a * centre)) - v[9];
     if !(k != T::zero()) || !centre.iter().all(|x| x.is_finite()) {
         return Err(Error::NotAnEllipsoid);

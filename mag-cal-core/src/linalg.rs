@@ -28,14 +28,20 @@ pub(crate) const MAX_SWEEPS: u32 = 60;
 /// A square array matrix, `a[row][column]`.
 pub(crate) type Mat<T, const N: usize> = [[T; N]; N];
 
-/// The array of an nalgebra matrix (column-major: `a[column][row]`, which is
-/// the same matrix for a symmetric one).
-pub(crate) fn to_array<T: Real, const N: usize>(m: &SMatrix<T, N, N>) -> Mat<T, N> {
+/// The columns of an nalgebra matrix, `a[column][row]` (its storage).
+///
+/// The crate's small matrices are nalgebra's (`Matrix3`, `SMatrix`); the
+/// decompositions of this module work on row arrays ([`Mat`], `a[row][column]`)
+/// and the public API takes rows ([`rows`], [`from_rows`]). Every matrix
+/// passed through `columns_of` / `from_columns` into a [`Mat`] function is
+/// symmetric, where rows and columns agree; the one deliberate transpose
+/// (subMLE's upper Cholesky factor) says so where it is taken.
+pub(crate) fn columns_of<T: Real, const N: usize>(m: &SMatrix<T, N, N>) -> Mat<T, N> {
     m.data.0
 }
 
 /// The nalgebra matrix of an array (read as `a[column][row]`).
-pub(crate) fn from_array<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N, N> {
+pub(crate) fn from_columns<T: Real, const N: usize>(a: Mat<T, N>) -> SMatrix<T, N, N> {
     SMatrix::from_data(ArrayStorage(a))
 }
 
@@ -495,7 +501,7 @@ pub(crate) fn solve3<T: Real>(a: &Mat<T, 3>, b: &[T; 3]) -> Option<[T; 3]> {
 /// The eigen-decomposition of a symmetric positive definite 3x3 matrix, or
 /// [`Error::NotAnEllipsoid`] when an eigenvalue is not clearly positive.
 fn positive_definite_eigen<T: Real>(m: &Matrix3<T>) -> Result<SymEigen<T, 3>, Error> {
-    let eig = sym_eigen(&to_array(m))?;
+    let eig = sym_eigen(&columns_of(m))?;
     let (_, max) = min_max(&eig.values);
     // A positive definite matrix whose smallest eigenvalue is lost in the
     // rounding of the largest is numerically singular.
@@ -526,7 +532,7 @@ fn spectral<T: Real>(eig: &SymEigen<T, 3>, f: impl Fn(T) -> T) -> Matrix3<T> {
             fm[i][j] = fm[j][i];
         }
     }
-    from_array(fm)
+    from_columns(fm)
 }
 
 /// `1 / sqrt(l)` for a positive `l`: [`Real::rsqrt`] where it is defined
@@ -769,14 +775,14 @@ mod tests {
     #[test]
     fn square_roots_are_inverse_and_square_to_the_matrix() {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ 5);
-        let a = from_array(with_spectrum(&mut rng, &[0.3, 1.0, 2.5]));
+        let a = from_columns(with_spectrum(&mut rng, &[0.3, 1.0, 2.5]));
         let (r, ri) = sym_sqrt_and_inv_sqrt(&a).unwrap();
         assert!((r * r - a).norm() < 1e-13);
         assert!((r * ri - Matrix3::identity()).norm() < 1e-13);
         assert_eq!(r, r.transpose());
         assert!((sym_sqrt(&a).unwrap() - r).norm() < 1e-15);
         assert!((sym_inv_sqrt(&a).unwrap() - ri).norm() < 1e-15);
-        let indefinite = from_array(with_spectrum(&mut rng, &[0.3, -1.0, 2.5]));
+        let indefinite = from_columns(with_spectrum(&mut rng, &[0.3, -1.0, 2.5]));
         assert_eq!(sym_sqrt(&indefinite).unwrap_err(), Error::NotAnEllipsoid);
     }
 }

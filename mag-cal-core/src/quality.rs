@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use crate::artificial::Stats;
 use crate::histogram::LogHistogram;
-use crate::linalg::{larger, min_max, sym_eigenvalues, to_array, tridiagonal};
+use crate::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
 use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{pieces, Filter, Finite, Gate};
@@ -360,7 +360,7 @@ pub(crate) fn flatness<T: Real>(m: &Moments<T>, count: usize) -> Result<T, Error
         m.get(0, 0, 2),
     ) / n;
     let cov = second - mean * mean.transpose();
-    let (min, max) = min_max(&sym_eigenvalues(&to_array(&cov))?);
+    let (min, max) = min_max(&sym_eigenvalues(&columns_of(&cov))?);
     if !(max > T::zero()) {
         return Err(Error::AllSamplesEqual);
     }
@@ -381,7 +381,7 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
     if !scatter.iter().all(|v| v.is_finite()) {
         return Err(Error::OutOfRange);
     }
-    let (d, e) = tridiagonal(&to_array(scatter));
+    let (d, e) = tridiagonal(&columns_of(scatter));
     // Gershgorin bound on the spectrum of the tridiagonal matrix.
     let mut top = T::zero();
     let mut left = T::zero();
@@ -458,7 +458,7 @@ fn kth_eigenvalue<T: Real>(d: &[T; 10], e: &[T; 10], k: usize, top: T, floor: T)
 
 /// Condition number of `M = W^2` for a symmetric positive definite `W`.
 pub(crate) fn distortion<T: Real>(w: &Matrix3<T>) -> Result<T, Error> {
-    let (lo, hi) = min_max(&sym_eigenvalues(&to_array(w))?);
+    let (lo, hi) = min_max(&sym_eigenvalues(&columns_of(w))?);
     if !(lo > T::zero()) {
         return Err(Error::NotAnEllipsoid);
     }
@@ -639,7 +639,7 @@ fn direction_figures<T: Real>(d: &DirectionSums<T>) -> Result<(T, T), Error> {
     let mean = d.s_h / n;
     let second = d.s_hh / n;
     let cov = second - mean * mean.transpose();
-    let (coverage, _) = min_max(&sym_eigenvalues(&to_array(&cov))?);
+    let (coverage, _) = min_max(&sym_eigenvalues(&columns_of(&cov))?);
     let g = [
         [second[(0, 0)], second[(0, 1)], second[(0, 2)], mean.x],
         [second[(1, 0)], second[(1, 1)], second[(1, 2)], mean.y],

@@ -24,7 +24,7 @@ use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector};
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
 use crate::linalg::{
-    cholesky, cholesky_inverse, from_array, min_max, sym_eigenvalues, sym_inv_sqrt, to_array,
+    cholesky, cholesky_inverse, columns_of, from_columns, min_max, sym_eigenvalues, sym_inv_sqrt,
 };
 use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
 use crate::methods::{weighted_stats, Estimate, Weights};
@@ -92,9 +92,9 @@ fn weight<T: Real>(
         }
         None => stats.residual_covariance(),
     };
-    let l = cholesky(&to_array(&sigma)).ok_or(Error::InvalidNoiseCovariance)?;
-    let inv = from_array(cholesky_inverse(&l));
-    let (_, top) = min_max(&sym_eigenvalues(&to_array(&inv))?);
+    let l = cholesky(&columns_of(&sigma)).ok_or(Error::InvalidNoiseCovariance)?;
+    let inv = from_columns(cholesky_inverse(&l));
+    let (_, top) = min_max(&sym_eigenvalues(&columns_of(&inv))?);
     if !(top > T::zero()) || !top.is_finite() {
         return Err(Error::InvalidNoiseCovariance);
     }

@@ -20,7 +20,7 @@ use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
 use crate::artificial::Stats;
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, cholesky_solve, min_max, sym_eigenvalues, sym_inv_sqrt, to_array};
+use crate::linalg::{cholesky, cholesky_solve, columns_of, min_max, sym_eigenvalues, sym_inv_sqrt};
 use crate::methods::{weighted_stats, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
@@ -98,7 +98,7 @@ pub struct Adc2Solution<T: Real> {
 /// is not unique (all `h_i` on one plane through the centre, or equal).
 /// Weak-but-regular geometry is judged by the quality checks, not here.
 pub(crate) fn check_gram<T: Real>(g: &Matrix4<T>) -> Result<(), Error> {
-    let (lo, hi) = min_max(&sym_eigenvalues(&to_array(g))?);
+    let (lo, hi) = min_max(&sym_eigenvalues(&columns_of(g))?);
     if lo > hi.abs() * T::EPSILON * T::lit(64.0) {
         Ok(())
     } else {
@@ -156,7 +156,7 @@ pub fn solve_closed_form<T: Real>(
 ) -> Result<Adc2Solution<T>, Error> {
     let g = stats.gram();
     check_gram(&g)?;
-    let l = cholesky(&to_array(&g)).ok_or(Error::SingularSystem)?;
+    let l = cholesky(&columns_of(&g)).ok_or(Error::SingularSystem)?;
     // Theta G = Q  <=>  G Theta^T = Q^T (G symmetric): row r of Theta
     // solves G x = (row r of Q). Rows of the column-major storage are read
     // by whole columns, no run-time index.

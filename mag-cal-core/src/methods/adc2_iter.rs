@@ -21,7 +21,7 @@
 use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, cholesky_inverse, from_array, sym_inv_sqrt, to_array};
+use crate::linalg::{cholesky, cholesky_inverse, columns_of, from_columns, sym_inv_sqrt};
 use crate::methods::{adc2, weighted_stats, Estimate, Weights};
 use crate::normalize::Normalization;
 use crate::quasi_newton::Anderson;
@@ -149,7 +149,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         let next = accel.step(&x, &g);
         // An extrapolated W' must stay positive definite; else take the
         // plain step and start the history afresh.
-        x = if cholesky(&to_array(&unpack(&next).0)).is_some() {
+        x = if cholesky(&columns_of(&unpack(&next).0)).is_some() {
             next
         } else {
             accel.reset();
@@ -173,6 +173,6 @@ pub(crate) fn step<T: Real, S: Sample>(
 
 /// Inverse of a symmetric positive definite matrix.
 fn inverse<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    let l = cholesky(&to_array(m)).ok_or(Error::NotAnEllipsoid)?;
-    Ok(from_array(cholesky_inverse(&l)))
+    let l = cholesky(&columns_of(m)).ok_or(Error::NotAnEllipsoid)?;
+    Ok(from_columns(cholesky_inverse(&l)))
 }

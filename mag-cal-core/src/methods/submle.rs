@@ -28,7 +28,7 @@
 use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, from_array, sym_sqrt, to_array};
+use crate::linalg::{cholesky, columns_of, from_columns, sym_sqrt};
 use crate::methods::{Estimate, Weights};
 use crate::moments::BLOCK;
 use crate::normalize::Normalization;
@@ -128,7 +128,7 @@ pub(crate) fn step<T: Real, S: Sample>(
     // A0^T A0 = M' with A0 upper triangular: the transposed Cholesky factor.
     // The array factor is L[row][column]; read as nalgebra's column-major
     // storage it is L^T, the upper factor.
-    let a0 = from_array(cholesky(&to_array(&ls.m)).ok_or(Error::NotAnEllipsoid)?);
+    let a0 = from_columns(cholesky(&columns_of(&ls.m)).ok_or(Error::NotAnEllipsoid)?);
     let x0 = pack(&a0, &ls.centre);
     let objective = SubMleObjective::gated(samples, norm, weights.gate);
     // The paper's stop: a step below 1e-6 of the parameter scale. The
