@@ -114,7 +114,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
     }
 }
 
-/// [`run`] over the rows the weights' gate passes (the drop rules and the
+/// subMLE from the LS fit, over the rows the weights' gate passes (the drop rules and the
 /// screening ball). No residual cut: the weights would change between the
 /// cost evaluations of one BFGS solve, and the cost with them; subMLE
 /// starts from the robust LS fit instead.
