@@ -29,7 +29,7 @@ SYMBOL=mag_cal_core_has_a_reachable_panic
 ELF=target/thumbv7em-none-eabihf/release/no-panic-check
 LIST=1
 PER_GROUP=0
-GROUPS_ALL=(calibrate calibration align heading store collector persist)
+GROUPS_ALL=(calibrate calibration align heading store collector persist ffi)
 for arg in "$@"; do
     case "$arg" in
     --no-list) LIST=0 ;;

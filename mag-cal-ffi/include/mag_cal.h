@@ -285,17 +285,29 @@ const char *magcal_status_str(int32_t status);
 
 // Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
 // handling on, the measured thresholds.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_config_default(MagcalConfig *out);
 
 // Calibrates from `count` raw readings `samples[i][0..3]` in integer
 // counts. On success fills `out`; on failure leaves it unchanged and says
 // why (a refusal names its cause).
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_calibrate_i16(const int16_t (*samples)[3],
                                   size_t count,
                                   const MagcalConfig *config,
                                   MagcalResult *out);
 
 // `magcal_calibrate_i16` for `float` readings (any unit).
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_calibrate_f32(const float (*samples)[3],
                                   size_t count,
                                   const MagcalConfig *config,
@@ -303,20 +315,36 @@ MagcalStatus magcal_calibrate_f32(const float (*samples)[3],
 
 // The calibrated reading `out[0..3] = W (raw - b)` (on the unit sphere)
 // of `raw[0..3]`, in `float`.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_apply(const MagcalCalibration *calibration, const float *raw, float *out);
 
 // Level heading in degrees in (-180, 180] of a calibrated reading
 // `field[0..3]`: `atan2(-y, x)`; 0 when undefined or `field` is null.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 float magcal_heading_deg(const float *field);
 
 // Tilt-compensated heading in degrees in (-180, 180] from a calibrated
 // field reading and the accelerometer's reading at rest (3 values each),
 // into `*out`; `MAGCAL_STATUS_UNDEFINED` when the field is along gravity
 // or a vector is zero.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_tilt_heading_deg(const float *field, const float *accel, float *out);
 
 // Sets up `s` to average the last `window` headings (1 to
 // `MAGCAL_SMOOTHER_MAX_WINDOW`).
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_smoother_init(MagcalSmoother *s, uint32_t window);
 
 // Adds `heading_deg` and writes the average of the last `window` headings
@@ -324,30 +352,58 @@ MagcalStatus magcal_smoother_init(MagcalSmoother *s, uint32_t window);
 // `MAGCAL_STATUS_UNDEFINED` when nothing finite has been pushed yet.
 //
 // `s` must have been set up by `magcal_smoother_init`.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_smoother_push(MagcalSmoother *s, float heading_deg, float *out);
 
 // Sets up `c` to keep readings at least `min_angle_deg` apart in direction
 // (4 is a good value).
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_collector_init(MagcalCollector *c, float min_angle_deg);
 
 // Offers one reading `sample[0..3]` to the collector.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalOffer magcal_collector_offer(MagcalCollector *c, const int16_t *sample);
 
 // The collection's progress into `*out`.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_collector_progress(const MagcalCollector *c, MagcalProgress *out);
 
 // The stored samples (oldest first) and their number in `*count`: what
 // `magcal_calibrate_i16` takes. Valid until the next offer. Null when `c`
 // or `count` is null.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 const int16_t (*magcal_collector_samples(const MagcalCollector *c, size_t *count))[3];
 
 // Writes `calibration` as `MAGCAL_RECORD_BYTES` checksummed bytes to
 // `buf` (of `len` bytes, at least that many), e.g. for flash.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_to_bytes(const MagcalCalibration *calibration, uint8_t *buf, size_t len);
 
 // Reads a calibration written by `magcal_to_bytes` from `buf` (`len`
 // bytes) into `*out`; a damaged record is refused (checksum, magic,
 // version), never half-read.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_from_bytes(const uint8_t *buf, size_t len, MagcalCalibration *out);
 
 #ifdef __cplusplus

@@ -20,6 +20,7 @@
 // behind a null check and documented.
 #![allow(unsafe_code)]
 #![deny(missing_docs)]
+#![deny(unsafe_op_in_unsafe_fn)]
 
 use core::ffi::c_char;
 use core::mem::{align_of, size_of};
@@ -250,8 +251,12 @@ pub struct MagcalConfig {
 
 /// Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
 /// handling on, the measured thresholds.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_config_default(out: *mut MagcalConfig) -> MagcalStatus {
+pub unsafe extern "C" fn magcal_config_default(out: *mut MagcalConfig) -> MagcalStatus {
     let t = Thresholds::DEFAULT;
     let c = Config::DEFAULT;
     let config = MagcalConfig {
@@ -500,8 +505,12 @@ fn run<S: Sample>(
 /// Calibrates from `count` raw readings `samples[i][0..3]` in integer
 /// counts. On success fills `out`; on failure leaves it unchanged and says
 /// why (a refusal names its cause).
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_calibrate_i16(
+pub unsafe extern "C" fn magcal_calibrate_i16(
     samples: *const [i16; 3],
     count: usize,
     config: *const MagcalConfig,
@@ -511,8 +520,12 @@ pub extern "C" fn magcal_calibrate_i16(
 }
 
 /// `magcal_calibrate_i16` for `float` readings (any unit).
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_calibrate_f32(
+pub unsafe extern "C" fn magcal_calibrate_f32(
     samples: *const [f32; 3],
     count: usize,
     config: *const MagcalConfig,
@@ -548,8 +561,12 @@ unsafe fn write3(p: *mut f32, v: [f32; 3]) {
 
 /// The calibrated reading `out[0..3] = W (raw - b)` (on the unit sphere)
 /// of `raw[0..3]`, in `float`.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_apply(
+pub unsafe extern "C" fn magcal_apply(
     calibration: *const MagcalCalibration,
     raw: *const f32,
     out: *mut f32,
@@ -561,8 +578,11 @@ pub extern "C" fn magcal_apply(
     if out.is_null() || !out.is_aligned() {
         return MagcalStatus::NullPointer;
     }
-    let d = [0, 1, 2].map(|i| f64::from(y[i]) - c.hard_iron[i]);
-    let u = c.soft_iron.map(|row| (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32);
+    let [bx, by, bz] = c.hard_iron;
+    let d = [f64::from(y[0]) - bx, f64::from(y[1]) - by, f64::from(y[2]) - bz];
+    let u = c
+        .soft_iron
+        .map(|row| (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32);
     // SAFETY: checked above.
     unsafe { write3(out, u) };
     MagcalStatus::Ok
@@ -570,8 +590,12 @@ pub extern "C" fn magcal_apply(
 
 /// Level heading in degrees in (-180, 180] of a calibrated reading
 /// `field[0..3]`: `atan2(-y, x)`; 0 when undefined or `field` is null.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_heading_deg(field: *const f32) -> f32 {
+pub unsafe extern "C" fn magcal_heading_deg(field: *const f32) -> f32 {
     // SAFETY: null-checked; 3 floats per the header.
     unsafe { read3(field) }.map_or(0.0, heading_deg)
 }
@@ -580,8 +604,12 @@ pub extern "C" fn magcal_heading_deg(field: *const f32) -> f32 {
 /// field reading and the accelerometer's reading at rest (3 values each),
 /// into `*out`; `MAGCAL_STATUS_UNDEFINED` when the field is along gravity
 /// or a vector is zero.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_tilt_heading_deg(
+pub unsafe extern "C" fn magcal_tilt_heading_deg(
     field: *const f32,
     accel: *const f32,
     out: *mut f32,
@@ -625,8 +653,12 @@ pub struct MagcalSmoother {
 
 /// Sets up `s` to average the last `window` headings (1 to
 /// `MAGCAL_SMOOTHER_MAX_WINDOW`).
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_smoother_init(s: *mut MagcalSmoother, window: u32) -> MagcalStatus {
+pub unsafe extern "C" fn magcal_smoother_init(s: *mut MagcalSmoother, window: u32) -> MagcalStatus {
     if s.is_null() {
         return MagcalStatus::NullPointer;
     }
@@ -645,8 +677,12 @@ pub extern "C" fn magcal_smoother_init(s: *mut MagcalSmoother, window: u32) -> M
 /// `MAGCAL_STATUS_UNDEFINED` when nothing finite has been pushed yet.
 ///
 /// `s` must have been set up by `magcal_smoother_init`.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_smoother_push(
+pub unsafe extern "C" fn magcal_smoother_push(
     s: *mut MagcalSmoother,
     heading_deg: f32,
     out: *mut f32,
@@ -726,8 +762,15 @@ pub struct MagcalProgress {
 
 /// Sets up `c` to keep readings at least `min_angle_deg` apart in direction
 /// (4 is a good value).
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_collector_init(c: *mut MagcalCollector, min_angle_deg: f32) -> MagcalStatus {
+pub unsafe extern "C" fn magcal_collector_init(
+    c: *mut MagcalCollector,
+    min_angle_deg: f32,
+) -> MagcalStatus {
     if c.is_null() {
         return MagcalStatus::NullPointer;
     }
@@ -747,8 +790,15 @@ unsafe fn collector<'a>(c: *const MagcalCollector) -> Option<&'a Coll> {
 }
 
 /// Offers one reading `sample[0..3]` to the collector.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_collector_offer(c: *mut MagcalCollector, sample: *const i16) -> MagcalOffer {
+pub unsafe extern "C" fn magcal_collector_offer(
+    c: *mut MagcalCollector,
+    sample: *const i16,
+) -> MagcalOffer {
     if c.is_null() || sample.is_null() || !sample.is_aligned() {
         return MagcalOffer::NullPointer;
     }
@@ -767,8 +817,12 @@ pub extern "C" fn magcal_collector_offer(c: *mut MagcalCollector, sample: *const
 }
 
 /// The collection's progress into `*out`.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_collector_progress(
+pub unsafe extern "C" fn magcal_collector_progress(
     c: *const MagcalCollector,
     out: *mut MagcalProgress,
 ) -> MagcalStatus {
@@ -790,8 +844,12 @@ pub extern "C" fn magcal_collector_progress(
 /// The stored samples (oldest first) and their number in `*count`: what
 /// `magcal_calibrate_i16` takes. Valid until the next offer. Null when `c`
 /// or `count` is null.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_collector_samples(
+pub unsafe extern "C" fn magcal_collector_samples(
     c: *const MagcalCollector,
     count: *mut usize,
 ) -> *const [i16; 3] {
@@ -810,8 +868,12 @@ const _: () = assert!(MAGCAL_RECORD_BYTES == ENCODED_LEN);
 
 /// Writes `calibration` as `MAGCAL_RECORD_BYTES` checksummed bytes to
 /// `buf` (of `len` bytes, at least that many), e.g. for flash.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_to_bytes(
+pub unsafe extern "C" fn magcal_to_bytes(
     calibration: *const MagcalCalibration,
     buf: *mut u8,
     len: usize,
@@ -841,8 +903,12 @@ pub extern "C" fn magcal_to_bytes(
 /// Reads a calibration written by `magcal_to_bytes` from `buf` (`len`
 /// bytes) into `*out`; a damaged record is refused (checksum, magic,
 /// version), never half-read.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
 #[no_mangle]
-pub extern "C" fn magcal_from_bytes(
+pub unsafe extern "C" fn magcal_from_bytes(
     buf: *const u8,
     len: usize,
     out: *mut MagcalCalibration,

@@ -40,7 +40,7 @@
 
 use core::hint::black_box;
 use core::panic::PanicInfo;
-use core::ptr::{addr_of, read_volatile};
+use core::ptr::{addr_of, addr_of_mut, read_volatile};
 
 use cortex_m_rt::entry;
 use mag_cal_core::align::{procrustes, AlignedCalibration};
@@ -355,6 +355,94 @@ fn persist<T: Real>(bytes: &'static RawSlice<u8>) {
     keep(restored);
 }
 
+/// Pointers from C: valid or null, the optimiser cannot tell which.
+#[cfg(feature = "ffi")]
+#[inline(always)]
+fn maybe_null<T>(p: *const T) -> *const T {
+    if opaque(&SCALARS_F32.window) == 0 {
+        core::ptr::null()
+    } else {
+        p
+    }
+}
+
+/// The C API: every function, on opaque arguments (a configuration read
+/// back from memory may hold any method number, a length any value).
+#[cfg(feature = "ffi")]
+#[inline(never)]
+fn ffi() {
+    use mag_cal_ffi::*;
+    static CONFIG: MagcalConfig = MagcalConfig {
+        method: MAGCAL_METHOD_ADC2,
+        ls: MAGCAL_LS_LS9,
+        precision: MAGCAL_PRECISION_F32,
+        robust: true,
+        max_iterations: 50,
+        max_passes: 50,
+        expected_field_strength: 0.0,
+        noise_sigma: 0.0,
+        refuse_fit_error: 0.2,
+        refuse_outlier_share: 0.25,
+        refuse_flatness: 0.03,
+        refuse_coverage: 0.05,
+    };
+    static mut RESULT: MaybeResult = MaybeResult([0; 64]);
+    static mut COLLECTOR: MagcalCollector = MagcalCollector {
+        storage: [0; MAGCAL_COLLECTOR_WORDS],
+    };
+    static mut SMOOTHER: MagcalSmoother = MagcalSmoother {
+        storage: [0; MAGCAL_SMOOTHER_WORDS],
+    };
+    static mut OUT3: [f32; 3] = [0.0; 3];
+    static mut RECORD: [u8; MAGCAL_RECORD_BYTES] = [0; MAGCAL_RECORD_BYTES];
+    /// Room for a `MagcalResult`, 8-aligned.
+    #[repr(C, align(8))]
+    struct MaybeResult([u64; 64]);
+    const _: () = assert!(core::mem::size_of::<MagcalResult>() <= 512);
+
+    let config = opaque(&CONFIG);
+    let samples_i16 = SAMPLES_I16.get();
+    let samples_f32 = SAMPLES_F32.get();
+    let count = opaque(&SCALARS_F32.window);
+    let result = addr_of_mut!(RESULT).cast::<MagcalResult>();
+    let out3 = addr_of_mut!(OUT3).cast::<f32>();
+    let raw = maybe_null(SCALARS_F32.raw.as_ptr());
+    // SAFETY: every pointer is null or points to a valid static of the
+    // documented size (the counts do not exceed the buffers' lengths when
+    // the samples are read: `count` is clamped below).
+    unsafe {
+        let mut config_out = config;
+        keep(magcal_config_default(&mut config_out));
+        let n_i16 = count.min(samples_i16.len());
+        let n_f32 = count.min(samples_f32.len());
+        keep(magcal_calibrate_i16(maybe_null(samples_i16.as_ptr()), n_i16, &config, result));
+        keep(magcal_calibrate_f32(maybe_null(samples_f32.as_ptr()), n_f32, &config, result));
+        let cal = maybe_null(addr_of!((*result).calibration));
+        keep(magcal_apply(cal, raw, out3));
+        keep(magcal_heading_deg(raw));
+        keep(magcal_tilt_heading_deg(raw, maybe_null(SCALARS_F32.accel.as_ptr()), out3));
+        keep(magcal_smoother_init(addr_of_mut!(SMOOTHER), count as u32));
+        keep(magcal_smoother_push(addr_of_mut!(SMOOTHER), opaque(&SCALARS_F32.raw[0]), out3));
+        keep(magcal_collector_init(addr_of_mut!(COLLECTOR), opaque(&ANGLE)));
+        keep(magcal_collector_offer(addr_of_mut!(COLLECTOR), maybe_null(BUF_I16[0].as_ptr())));
+        let mut progress = MagcalProgress {
+            samples: 0,
+            cells_visited: 0,
+            cells: 0,
+            percent: 0,
+            ready: false,
+        };
+        keep(magcal_collector_progress(addr_of!(COLLECTOR), &mut progress));
+        let mut n = 0usize;
+        keep(magcal_collector_samples(addr_of!(COLLECTOR), &mut n));
+        let record = addr_of_mut!(RECORD).cast::<u8>();
+        keep(magcal_to_bytes(cal, record, count));
+        let bytes = BYTES.get();
+        keep(magcal_from_bytes(maybe_null(bytes.as_ptr()), bytes.len(), addr_of_mut!((*result).calibration)));
+        keep(magcal_status_str(opaque(&SCALARS_F32.window) as i32));
+    }
+}
+
 /// A deliberate panic path the optimiser cannot remove: the check must
 /// fail with this feature.
 #[cfg(feature = "canary")]
@@ -409,6 +497,8 @@ fn main() -> ! {
             persist::<f32>(&BYTES);
             persist::<f64>(&BYTES);
         }
+        #[cfg(feature = "ffi")]
+        ffi();
         #[cfg(feature = "canary")]
         canary();
         // The buffers stay in the image whatever is enabled.

@@ -3,10 +3,12 @@
 //!
 //! | command | what |
 //! |---|---|
-//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm` (apt), `defmt-print` and `flip-link` (cargo install) |
+//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm`, `gcc-arm-none-eabi` and `libnewlib-arm-none-eabi` (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
 //! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
+//! | `header` | regenerate the C header `mag-cal-ffi/include/mag_cal.h` with cbindgen |
+//! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //!
@@ -25,6 +27,10 @@ const DEFMT_PRINT_VERSION: &str = "1.2.0";
 /// static data so that an overflow faults instead of corrupting them.
 const FLIP_LINK_VERSION: &str = "0.1.12";
 
+/// `cbindgen` version that generates the C header (a newer one may format
+/// it differently: the header check compares its output byte for byte).
+const CBINDGEN_VERSION: &str = "0.29.4";
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
@@ -33,9 +39,11 @@ fn main() {
         Some("qemu-faults") => setup().and_then(|()| qemu_faults()),
         Some("test") => setup().and_then(|()| test_all()),
         Some("package") => package_check(),
+        Some("header") => header(true),
+        Some("c") => setup().and_then(|()| c_tests()),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|bench [--verify] [--host]>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|bench [--verify] [--host]>");
             exit(2);
         }
     };
@@ -104,9 +112,21 @@ fn setup() -> Result<(), String> {
     // A toolchain of that channel installed earlier without the target
     // (seen: `toolchain install` then leaves it out); a no-op when present.
     run(&root, "rustup", &["target", "add", "thumbv7em-none-eabihf"])?;
+    // Debian packages: QEMU's ARM system emulator, and the Arm GNU
+    // toolchain with newlib for the C API's Cortex-M4F build.
+    let mut packages = Vec::new();
     if !on_path("qemu-system-arm") {
+        packages.push("qemu-system-arm");
+    }
+    if !on_path("arm-none-eabi-gcc") {
+        packages.extend(["gcc-arm-none-eabi", "libnewlib-arm-none-eabi"]);
+    }
+    if !packages.is_empty() {
         if !on_path("apt-get") {
-            return Err("qemu-system-arm is missing and apt-get is not available: install QEMU's ARM system emulator".into());
+            return Err(format!(
+                "{} missing and apt-get is not available: install them",
+                packages.join(", ")
+            ));
         }
         // No prompts: CI has no standard input. `sudo` drops the
         // environment, so the frontend is passed as its argument.
@@ -122,11 +142,14 @@ fn setup() -> Result<(), String> {
             run(&root, full[0], &full[1..])
         };
         apt(&["update", "-qq"])?;
-        apt(&["install", "-y", "-qq", "qemu-system-arm"])?;
+        let mut install = vec!["install", "-y", "-qq"];
+        install.extend(&packages);
+        apt(&install)?;
     }
     for (tool, version) in [
         ("defmt-print", DEFMT_PRINT_VERSION),
         ("flip-link", FLIP_LINK_VERSION),
+        ("cbindgen", CBINDGEN_VERSION),
     ] {
         if !on_path(tool) {
             run(
@@ -202,6 +225,7 @@ fn test_all() -> Result<(), String> {
     )?;
     examples()?;
     package_check()?;
+    c_tests()?;
     run_on_qemu("ontarget")?;
     // The board example to copy, on the emulated board.
     run_on_qemu("compass")?;
@@ -232,6 +256,204 @@ fn examples() -> Result<(), String> {
     example("calibrate_log", &[path_str(&log)?])?;
     example("heading", &[])?;
     example("persist", &[])
+}
+
+/// The C header of `mag-cal-ffi`, generated by cbindgen: written to
+/// `mag-cal-ffi/include/mag_cal.h` (`write`), or compared with it (a stale
+/// header fails).
+fn header(write: bool) -> Result<(), String> {
+    let root = root();
+    let ffi = root.join("mag-cal-ffi");
+    let committed = ffi.join("include").join("mag_cal.h");
+    let generated = root.join("target").join("c").join("mag_cal.h");
+    std::fs::create_dir_all(root.join("target").join("c")).map_err(|e| e.to_string())?;
+    let out = if write { &committed } else { &generated };
+    run(
+        &ffi,
+        "cbindgen",
+        &[
+            "--quiet",
+            "--config",
+            "cbindgen.toml",
+            "--crate",
+            "mag-cal-ffi",
+            "--output",
+            path_str(out)?,
+        ],
+    )?;
+    if write {
+        return Ok(());
+    }
+    let read = |p: &Path| std::fs::read(p).map_err(|e| format!("{}: {e}", p.display()));
+    if read(&committed)? != read(&generated)? {
+        return Err(format!(
+            "{} is stale: regenerate it with `cargo xtask header` (compare {})",
+            committed.display(),
+            generated.display()
+        ));
+    }
+    println!("the C header is current");
+    Ok(())
+}
+
+/// Runs a command and returns its standard output.
+fn output(dir: &Path, program: &str, args: &[&str]) -> Result<Vec<u8>, String> {
+    println!("\n==> ({}) {program} {}", dir.display(), args.join(" "));
+    let out = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .map_err(|e| format!("cannot start {program}: {e}"))?;
+    if out.status.success() {
+        Ok(out.stdout)
+    } else {
+        Err(format!(
+            "`{program} {}` failed ({}): {}",
+            args.join(" "),
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        ))
+    }
+}
+
+/// The C API: the header is current; `mag-cal-ffi/c/calibrate.c` built
+/// with gcc against the host static library and with arm-none-eabi-gcc
+/// against the Cortex-M4F one (run under QEMU, semihosting) calibrates a
+/// shared recording and agrees with `magcal fit --format json` on it, in
+/// `f64` and `f32` (the program checks and exits non-zero otherwise).
+fn c_tests() -> Result<(), String> {
+    header(false)?;
+    let root = root();
+    let c_dir = root.join("target").join("c");
+    let log = root.join("../shared/data/real/icm20948_mag_300.csv");
+    let log = path_str(&log)?;
+    run(
+        &root,
+        "cargo",
+        &[
+            "build",
+            "--release",
+            "--locked",
+            "-p",
+            "mag-cal-ffi",
+            "-p",
+            "mag-cal-cli",
+        ],
+    )?;
+    let magcal = root.join("target/release/magcal");
+    for precision in ["f64", "f32"] {
+        let json = output(
+            &root,
+            path_str(&magcal)?,
+            &["fit", log, "--format", "json", "--precision", precision],
+        )?;
+        let file = c_dir.join(format!("expected-{precision}.json"));
+        std::fs::write(&file, json).map_err(|e| format!("{}: {e}", file.display()))?;
+    }
+    let include = format!("-I{}", path_str(&root.join("mag-cal-ffi/include"))?);
+    let source = root.join("mag-cal-ffi/c/calibrate.c");
+    let warnings = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-O2"];
+
+    // Host: gcc, the static library and the libraries Rust's std needs
+    // (`cargo rustc -- --print native-static-libs`).
+    let host_bin = c_dir.join("calibrate");
+    let mut args: Vec<&str> = warnings.to_vec();
+    let host_lib = root.join("target/release/libmag_cal_ffi.a");
+    args.extend([include.as_str(), path_str(&source)?, path_str(&host_lib)?]);
+    args.extend([
+        "-lgcc_s",
+        "-lutil",
+        "-lrt",
+        "-lpthread",
+        "-lm",
+        "-ldl",
+        "-lc",
+    ]);
+    args.extend(["-o", path_str(&host_bin)?]);
+    run(&root, "gcc", &args)?;
+    for precision in ["f64", "f32"] {
+        let expected = c_dir.join(format!("expected-{precision}.json"));
+        run(
+            &root,
+            path_str(&host_bin)?,
+            &[log, precision, path_str(&expected)?],
+        )?;
+    }
+
+    // Cortex-M4F: the static library for thumbv7em, newlib with
+    // semihosting (the log and the JSON are read from the host), QEMU.
+    run(
+        &root,
+        "cargo",
+        &[
+            "rustc",
+            "--release",
+            "--locked",
+            "-p",
+            "mag-cal-ffi",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--crate-type",
+            "staticlib",
+        ],
+    )?;
+    let m4_lib = root.join("target/thumbv7em-none-eabihf/release/libmag_cal_ffi.a");
+    let m4_bin = c_dir.join("calibrate-m4.elf");
+    let cortex = root.join("mag-cal-ffi/c/cortex-m");
+    let mut args: Vec<&str> = warnings.to_vec();
+    args.extend([
+        "-mcpu=cortex-m4",
+        "-mthumb",
+        "-mfloat-abi=hard",
+        "-mfpu=fpv4-sp-d16",
+        "--specs=rdimon.specs",
+        "-Wl,--gc-sections",
+        "-Wl,--no-warn-execstack",
+    ]);
+    let (script, startup) = (cortex.join("link.ld"), cortex.join("startup.c"));
+    args.extend([
+        "-T",
+        path_str(&script)?,
+        include.as_str(),
+        path_str(&startup)?,
+    ]);
+    args.extend([
+        path_str(&source)?,
+        path_str(&m4_lib)?,
+        "-lm",
+        "-o",
+        path_str(&m4_bin)?,
+    ]);
+    run(&root, "arm-none-eabi-gcc", &args)?;
+    for precision in ["f32", "f64"] {
+        let expected = c_dir.join(format!("expected-{precision}.json"));
+        let semihosting = format!(
+            "enable=on,target=native,arg=calibrate,arg={log},arg={precision},arg={}",
+            path_str(&expected)?
+        );
+        run(
+            &root,
+            "timeout",
+            &[
+                "300",
+                "qemu-system-arm",
+                "-cpu",
+                "cortex-m4",
+                "-machine",
+                "mps2-an386",
+                "-nographic",
+                "-monitor",
+                "none",
+                "-serial",
+                "none",
+                "-semihosting-config",
+                &semihosting,
+                "-kernel",
+                path_str(&m4_bin)?,
+            ],
+        )?;
+    }
+    Ok(())
 }
 
 /// The value of the first `key = "value"` line after the line `section` of
