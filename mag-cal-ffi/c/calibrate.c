@@ -118,11 +118,11 @@ int main(int argc, char **argv) {
 
     MagcalConfig config;
     magcal_config_default(&config);
-    config.precision = f64 ? MAGCAL_PRECISION_F64 : MAGCAL_PRECISION_F32;
     MagcalResult r;
-    MagcalStatus s = magcal_calibrate_i16((const int16_t(*)[3])samples, n, &config, &r);
+    MagcalStatus s = f64 ? magcal_calibrate_i16_f64((const int16_t(*)[3])samples, n, &config, &r)
+                         : magcal_calibrate_i16((const int16_t(*)[3])samples, n, &config, &r);
     if (s != MAGCAL_STATUS_OK) {
-        printf("not calibrated: %s\n", magcal_status_str(s));
+        printf("not calibrated: %s\n", magcal_error_str(s));
         return 3;
     }
     const MagcalCalibration *cal = &r.calibration;
@@ -164,7 +164,7 @@ int main(int argc, char **argv) {
     }
     record[10] ^= 0x01;
     s = magcal_from_bytes(record, sizeof record, &back);
-    printf("a damaged record: %s\n", magcal_status_str(s));
+    printf("a damaged record: %s\n", magcal_error_str(s));
     if (s != MAGCAL_STATUS_CHECKSUM_MISMATCH) failed = 1;
 
     /* The collector, as firmware would feed it. */
@@ -184,7 +184,7 @@ int main(int argc, char **argv) {
         still[i][2] = (int16_t)(300 + i % 2);
     }
     s = magcal_calibrate_i16((const int16_t(*)[3])still, 200, &config, &r);
-    printf("a device lying still: %s\n", magcal_status_str(s));
+    printf("a device lying still: %s\n", magcal_error_str(s));
     if (s == MAGCAL_STATUS_OK) failed = 1;
 
     if (argc >= 4) failed |= check(cal, argv[3], f64 ? 1e-6 : 1e-4);

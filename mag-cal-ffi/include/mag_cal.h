@@ -32,14 +32,6 @@
 // `MagcalConfig::ls`: Li and Griffiths' ellipsoid-specific fit.
 #define MAGCAL_LS_LG10 2
 
-// `MagcalConfig::precision`: `float` (hardware floating point on a
-// Cortex-M4F; the default).
-#define MAGCAL_PRECISION_F32 0
-
-// `MagcalConfig::precision`: `double` (software floating point on a
-// Cortex-M4F).
-#define MAGCAL_PRECISION_F64 1
-
 // The largest window of the heading smoother.
 #define MAGCAL_SMOOTHER_MAX_WINDOW 64
 
@@ -88,7 +80,7 @@
 #define MAGCAL_WARNING_HIGH_FIT_ERROR (1 << 9)
 
 // The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-// `magcal_status_str` gives a sentence for each.
+// `magcal_error_str` gives a sentence for each.
 typedef enum {
   // Success.
   MAGCAL_STATUS_OK = 0,
@@ -167,8 +159,6 @@ typedef struct {
   uint32_t method;
   // The LS variant, a `MAGCAL_LS_*` value.
   uint32_t ls;
-  // The working precision, a `MAGCAL_PRECISION_*` value.
-  uint32_t precision;
   // Outlier handling (true by default).
   bool robust;
   // Iteration cap of each quasi-Newton solve (50).
@@ -281,7 +271,7 @@ extern "C" {
 
 // A sentence for a status, NUL-terminated, static (never null; "unknown
 // status" for a value that is none).
-const char *magcal_status_str(int32_t status);
+const char *magcal_error_str(int32_t status);
 
 // Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
 // handling on, the measured thresholds.
@@ -292,8 +282,9 @@ const char *magcal_status_str(int32_t status);
 MagcalStatus magcal_config_default(MagcalConfig *out);
 
 // Calibrates from `count` raw readings `samples[i][0..3]` in integer
-// counts. On success fills `out`; on failure leaves it unchanged and says
-// why (a refusal names its cause).
+// counts, computing in `float` (hardware floating point on a Cortex-M4F).
+// On success fills `out`; on failure leaves it unchanged and says why (a
+// refusal names its cause).
 //
 // # Safety
 // Every non-null pointer must point to valid memory of the documented
@@ -312,6 +303,28 @@ MagcalStatus magcal_calibrate_f32(const float (*samples)[3],
                                   size_t count,
                                   const MagcalConfig *config,
                                   MagcalResult *out);
+
+// `magcal_calibrate_i16` computing in `double` (software floating point
+// on a Cortex-M4F: several times the time and about twice the flash; a
+// program that does not call it does not link it).
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
+MagcalStatus magcal_calibrate_i16_f64(const int16_t (*samples)[3],
+                                      size_t count,
+                                      const MagcalConfig *config,
+                                      MagcalResult *out);
+
+// `magcal_calibrate_f32` computing in `double`.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
+MagcalStatus magcal_calibrate_f32_f64(const float (*samples)[3],
+                                      size_t count,
+                                      const MagcalConfig *config,
+                                      MagcalResult *out);
 
 // The calibrated reading `out[0..3] = W (raw - b)` (on the unit sphere)
 // of `raw[0..3]`, in `float`.

@@ -11,7 +11,7 @@
 //! magcal_config_default(&config);
 //! MagcalResult result;
 //! MagcalStatus s = magcal_calibrate_i16(samples, n, &config, &result);
-//! if (s != MAGCAL_STATUS_OK) printf("%s\n", magcal_status_str(s));
+//! if (s != MAGCAL_STATUS_OK) printf("%s\n", magcal_error_str(s));
 //! float u[3];
 //! magcal_apply(&result.calibration, raw, u);
 //! ```
@@ -33,7 +33,7 @@ use mag_cal_core::{
 };
 
 /// The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-/// `magcal_status_str` gives a sentence for each.
+/// `magcal_error_str` gives a sentence for each.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MagcalStatus {
@@ -153,7 +153,7 @@ impl From<Error> for MagcalStatus {
 /// A sentence for a status, NUL-terminated, static (never null; "unknown
 /// status" for a value that is none).
 #[no_mangle]
-pub extern "C" fn magcal_status_str(status: i32) -> *const c_char {
+pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
     let Some(status) = MagcalStatus::ALL.into_iter().find(|s| *s as i32 == status) else {
         return c"unknown status".as_ptr();
     };
@@ -209,13 +209,6 @@ pub const MAGCAL_LS_SVD10: u32 = 1;
 /// `MagcalConfig::ls`: Li and Griffiths' ellipsoid-specific fit.
 pub const MAGCAL_LS_LG10: u32 = 2;
 
-/// `MagcalConfig::precision`: `float` (hardware floating point on a
-/// Cortex-M4F; the default).
-pub const MAGCAL_PRECISION_F32: u32 = 0;
-/// `MagcalConfig::precision`: `double` (software floating point on a
-/// Cortex-M4F).
-pub const MAGCAL_PRECISION_F64: u32 = 1;
-
 /// What to run. Fill with `magcal_config_default`, then change fields.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -224,8 +217,6 @@ pub struct MagcalConfig {
     pub method: u32,
     /// The LS variant, a `MAGCAL_LS_*` value.
     pub ls: u32,
-    /// The working precision, a `MAGCAL_PRECISION_*` value.
-    pub precision: u32,
     /// Outlier handling (true by default).
     pub robust: bool,
     /// Iteration cap of each quasi-Newton solve (50).
@@ -262,7 +253,6 @@ pub unsafe extern "C" fn magcal_config_default(out: *mut MagcalConfig) -> Magcal
     let config = MagcalConfig {
         method: MAGCAL_METHOD_ADC2,
         ls: MAGCAL_LS_LS9,
-        precision: MAGCAL_PRECISION_F32,
         robust: c.robust,
         max_iterations: c.max_iterations,
         max_passes: c.max_passes,
@@ -469,7 +459,7 @@ unsafe fn slice<'a, S>(samples: *const S, count: usize) -> Result<&'a [S], Magca
     Ok(unsafe { core::slice::from_raw_parts(samples, count) })
 }
 
-fn run<S: Sample>(
+fn run<T: Real, S: Sample>(
     samples: *const S,
     count: usize,
     config: *const MagcalConfig,
@@ -488,14 +478,9 @@ fn run<S: Sample>(
         Ok(c) => c,
         Err(e) => return e,
     };
-    let result = match config.precision {
-        MAGCAL_PRECISION_F32 => calibrate::<f32, S>(samples, &core).map(|f| MagcalResult::from(&f)),
-        MAGCAL_PRECISION_F64 => calibrate::<f64, S>(samples, &core).map(|f| MagcalResult::from(&f)),
-        _ => return MagcalStatus::InvalidArgument,
-    };
-    match result {
-        Ok(r) => {
-            *out = r;
+    match calibrate::<T, S>(samples, &core) {
+        Ok(fit) => {
+            *out = MagcalResult::from(&fit);
             MagcalStatus::Ok
         }
         Err(e) => e.into(),
@@ -503,8 +488,9 @@ fn run<S: Sample>(
 }
 
 /// Calibrates from `count` raw readings `samples[i][0..3]` in integer
-/// counts. On success fills `out`; on failure leaves it unchanged and says
-/// why (a refusal names its cause).
+/// counts, computing in `float` (hardware floating point on a Cortex-M4F).
+/// On success fills `out`; on failure leaves it unchanged and says why (a
+/// refusal names its cause).
 ///
 /// # Safety
 /// Every non-null pointer must point to valid memory of the documented
@@ -516,7 +502,7 @@ pub unsafe extern "C" fn magcal_calibrate_i16(
     config: *const MagcalConfig,
     out: *mut MagcalResult,
 ) -> MagcalStatus {
-    run(samples, count, config, out)
+    run::<f32, _>(samples, count, config, out)
 }
 
 /// `magcal_calibrate_i16` for `float` readings (any unit).
@@ -531,7 +517,39 @@ pub unsafe extern "C" fn magcal_calibrate_f32(
     config: *const MagcalConfig,
     out: *mut MagcalResult,
 ) -> MagcalStatus {
-    run(samples, count, config, out)
+    run::<f32, _>(samples, count, config, out)
+}
+
+/// `magcal_calibrate_i16` computing in `double` (software floating point
+/// on a Cortex-M4F: several times the time and about twice the flash; a
+/// program that does not call it does not link it).
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
+#[no_mangle]
+pub unsafe extern "C" fn magcal_calibrate_i16_f64(
+    samples: *const [i16; 3],
+    count: usize,
+    config: *const MagcalConfig,
+    out: *mut MagcalResult,
+) -> MagcalStatus {
+    run::<f64, _>(samples, count, config, out)
+}
+
+/// `magcal_calibrate_f32` computing in `double`.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
+#[no_mangle]
+pub unsafe extern "C" fn magcal_calibrate_f32_f64(
+    samples: *const [f32; 3],
+    count: usize,
+    config: *const MagcalConfig,
+    out: *mut MagcalResult,
+) -> MagcalStatus {
+    run::<f64, _>(samples, count, config, out)
 }
 
 /// Reads 3 values at `p`.
@@ -579,7 +597,11 @@ pub unsafe extern "C" fn magcal_apply(
         return MagcalStatus::NullPointer;
     }
     let [bx, by, bz] = c.hard_iron;
-    let d = [f64::from(y[0]) - bx, f64::from(y[1]) - by, f64::from(y[2]) - bz];
+    let d = [
+        f64::from(y[0]) - bx,
+        f64::from(y[1]) - by,
+        f64::from(y[2]) - bz,
+    ];
     let u = c
         .soft_iron
         .map(|row| (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32);

@@ -375,7 +375,6 @@ fn ffi() {
     static CONFIG: MagcalConfig = MagcalConfig {
         method: MAGCAL_METHOD_ADC2,
         ls: MAGCAL_LS_LS9,
-        precision: MAGCAL_PRECISION_F32,
         robust: true,
         max_iterations: 50,
         max_passes: 50,
@@ -417,6 +416,8 @@ fn ffi() {
         let n_f32 = count.min(samples_f32.len());
         keep(magcal_calibrate_i16(maybe_null(samples_i16.as_ptr()), n_i16, &config, result));
         keep(magcal_calibrate_f32(maybe_null(samples_f32.as_ptr()), n_f32, &config, result));
+        keep(magcal_calibrate_i16_f64(maybe_null(samples_i16.as_ptr()), n_i16, &config, result));
+        keep(magcal_calibrate_f32_f64(maybe_null(samples_f32.as_ptr()), n_f32, &config, result));
         let cal = maybe_null(addr_of!((*result).calibration));
         keep(magcal_apply(cal, raw, out3));
         keep(magcal_heading_deg(raw));
@@ -439,7 +440,7 @@ fn ffi() {
         keep(magcal_to_bytes(cal, record, count));
         let bytes = BYTES.get();
         keep(magcal_from_bytes(maybe_null(bytes.as_ptr()), bytes.len(), addr_of_mut!((*result).calibration)));
-        keep(magcal_status_str(opaque(&SCALARS_F32.window) as i32));
+        keep(magcal_error_str(opaque(&SCALARS_F32.window) as i32));
     }
 }
 

@@ -41,6 +41,7 @@ fn main() {
         Some("package") => package_check(),
         Some("header") => header(true),
         Some("c") => setup().and_then(|()| c_tests()),
+        Some("c-footprint") => setup().and_then(|()| c_footprint()),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
         _ => {
             eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|bench [--verify] [--host]>");
@@ -456,6 +457,130 @@ fn c_tests() -> Result<(), String> {
     Ok(())
 }
 
+/// Footprint of the C API on the Cortex-M4F (`mag-cal-ffi/c/cortex-m/
+/// footprint.c`): flash of the program with one `magcal_calibrate_i16` call
+/// over the same program without it, for the static library with every
+/// method and with LS9 + ADC2 alone (profile `c-m4`: opt-level "s", fat
+/// LTO), and the stack high-water mark of the call (n = 1000, float).
+/// Prints `FOOTPRINT-C <build> flash=<bytes> stack=<bytes>`.
+fn c_footprint() -> Result<(), String> {
+    let root = root();
+    let c_dir = root.join("target").join("c");
+    std::fs::create_dir_all(&c_dir).map_err(|e| e.to_string())?;
+    let lib = root.join("target/thumbv7em-none-eabihf/c-m4/libmag_cal_ffi.a");
+    let cortex = root.join("mag-cal-ffi/c/cortex-m");
+    let include = format!("-I{}", path_str(&root.join("mag-cal-ffi/include"))?);
+    let (script, startup, source) = (
+        cortex.join("link.ld"),
+        cortex.join("startup.c"),
+        cortex.join("footprint.c"),
+    );
+    let mut text = Vec::new();
+    // The baseline links the library with every method but calls nothing.
+    let every: &[&str] = &["--features", "panic-handler,all-methods"];
+    for (name, features, baseline) in [
+        ("baseline", every, true),
+        (
+            "ls9+adc2",
+            &["--no-default-features", "--features", "panic-handler"][..],
+            false,
+        ),
+        ("all-methods", every, false),
+    ] {
+        let mut cargo = vec![
+            "rustc",
+            "--profile",
+            "c-m4",
+            "--locked",
+            "-p",
+            "mag-cal-ffi",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--crate-type",
+            "staticlib",
+        ];
+        cargo.extend(features);
+        run(&root, "cargo", &cargo)?;
+        let elf = c_dir.join(format!("footprint-{name}.elf"));
+        let mut args = vec![
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-Os",
+            "-ffunction-sections",
+            "-fdata-sections",
+            "-mcpu=cortex-m4",
+            "-mthumb",
+            "-mfloat-abi=hard",
+            "-mfpu=fpv4-sp-d16",
+            "--specs=rdimon.specs",
+            "-Wl,--gc-sections",
+            "-Wl,--no-warn-execstack",
+            "-T",
+            path_str(&script)?,
+            include.as_str(),
+            path_str(&startup)?,
+            path_str(&source)?,
+            path_str(&lib)?,
+            "-lm",
+            "-o",
+            path_str(&elf)?,
+        ];
+        if baseline {
+            args.push("-DBASELINE");
+        }
+        run(&root, "arm-none-eabi-gcc", &args)?;
+        // Berkeley `text`: code and read-only data (this link script puts
+        // .rodata into .text).
+        let size = output(&root, "arm-none-eabi-size", &[path_str(&elf)?])?;
+        let size = String::from_utf8_lossy(&size);
+        let flash: u64 = size
+            .lines()
+            .nth(1)
+            .and_then(|l| l.split_whitespace().next())
+            .and_then(|t| t.parse().ok())
+            .ok_or("arm-none-eabi-size: no text column")?;
+        let log = output(
+            &root,
+            "timeout",
+            &[
+                "120",
+                "qemu-system-arm",
+                "-cpu",
+                "cortex-m4",
+                "-machine",
+                "mps2-an386",
+                "-nographic",
+                "-monitor",
+                "none",
+                "-serial",
+                "none",
+                "-semihosting-config",
+                "enable=on,target=native",
+                "-kernel",
+                path_str(&elf)?,
+            ],
+        )?;
+        let log = String::from_utf8_lossy(&log);
+        let stack: u64 = log
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix("stack="))
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| format!("footprint.c printed no stack figure: {log}"))?;
+        text.push((name, flash, stack));
+    }
+    let (_, base_flash, base_stack) = text[0];
+    for (name, flash, stack) in &text[1..] {
+        println!(
+            "FOOTPRINT-C {name} flash={} stack={}",
+            flash - base_flash,
+            stack - base_stack
+        );
+    }
+    Ok(())
+}
+
 /// The value of the first `key = "value"` line after the line `section` of
 /// the TOML file `path` (enough for this repository's manifests).
 fn toml_value(path: &Path, section: &str, key: &str) -> Result<String, String> {
@@ -540,6 +665,7 @@ fn bench(args: &[String]) -> Result<(), String> {
         bench_args.push("--verify");
     }
     run(&firmware_dir(), "bash", &bench_args)?;
+    c_footprint()?;
     if host {
         run(&root(), "cargo", &["bench", "--locked", "-p", "benches"])?;
     }
