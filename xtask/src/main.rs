@@ -331,14 +331,20 @@ fn c_tests() -> Result<(), String> {
     run(
         &root,
         "cargo",
+        &["build", "--release", "--locked", "-p", "mag-cal-cli"],
+    )?;
+    // The C libraries (the crate is an rlib by its manifest).
+    run(
+        &root,
+        "cargo",
         &[
-            "build",
+            "rustc",
             "--release",
             "--locked",
             "-p",
             "mag-cal-ffi",
-            "-p",
-            "mag-cal-cli",
+            "--crate-type",
+            "staticlib,cdylib",
         ],
     )?;
     let magcal = root.join("target/release/magcal");
