@@ -153,6 +153,41 @@ typedef enum {
   MAGCAL_OFFER_NULL_POINTER = 6,
 } MagcalOffer;
 
+// The judging limits (`magcal_config_default` fills the measured ones).
+// Every figure is relative to the field; see `mag-cal-core`'s docs.
+typedef struct {
+  // Fewer rows used than this: a warning (50).
+  uint32_t warn_samples;
+  // Flatness below this: refused as planar (0.03).
+  float refuse_flatness;
+  // Flatness below this: a warning (0.1).
+  float warn_flatness;
+  // Quadric gap below this, on data that fit well: refused as ambiguous (3).
+  float refuse_quadric_gap;
+  // The radial RMS below which the quadric gap is judged (0.05).
+  float gap_noise_limit;
+  // Quadric gap below this: a warning (10).
+  float warn_quadric_gap;
+  // Condition number of `M` above this: refused (16).
+  float refuse_distortion;
+  // Coverage below this: refused (0.05).
+  float refuse_coverage;
+  // Gram condition above this: a warning (20).
+  float warn_gram_condition;
+  // Relative field-strength deviation above this: refused (0.25).
+  float refuse_field_deviation;
+  // Spread below this many noise deviations: a warning (10).
+  float warn_spread_over_noise;
+  // Fit error above this: refused as no sphere (0.2).
+  float refuse_fit_error;
+  // Fit error above this: a warning (0.05).
+  float warn_fit_error;
+  // Share of rows left out above this: refused (0.25).
+  float refuse_outlier_share;
+  // Lack of fit above this (and significant): refused (0.01).
+  float refuse_lack_of_fit;
+} MagcalThresholds;
+
 // What to run. Fill with `magcal_config_default`, then change fields.
 typedef struct {
   // The method, a `MAGCAL_METHOD_*` value.
@@ -171,15 +206,8 @@ typedef struct {
   // Per-axis noise standard deviation in sensor units when known, else
   // 0 (for ADC1 and the spread warning).
   double noise_sigma;
-  // Fit error (robust sigma of the radial residual, units of the field)
-  // above which a fit is refused as no sphere (0.2).
-  float refuse_fit_error;
-  // Share of rows left out above which a fit is refused (0.25).
-  float refuse_outlier_share;
-  // Flatness below which the samples are refused as planar (0.03).
-  float refuse_flatness;
-  // Coverage below which a fit is refused (0.05).
-  float refuse_coverage;
+  // The judging limits.
+  MagcalThresholds thresholds;
 } MagcalConfig;
 
 // A calibration: `u = W (raw - b)` lies on the unit sphere. `W` is by

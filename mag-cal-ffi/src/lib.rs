@@ -209,6 +209,87 @@ pub const MAGCAL_LS_SVD10: u32 = 1;
 /// `MagcalConfig::ls`: Li and Griffiths' ellipsoid-specific fit.
 pub const MAGCAL_LS_LG10: u32 = 2;
 
+/// The judging limits (`magcal_config_default` fills the measured ones).
+/// Every figure is relative to the field; see `mag-cal-core`'s docs.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MagcalThresholds {
+    /// Fewer rows used than this: a warning (50).
+    pub warn_samples: u32,
+    /// Flatness below this: refused as planar (0.03).
+    pub refuse_flatness: f32,
+    /// Flatness below this: a warning (0.1).
+    pub warn_flatness: f32,
+    /// Quadric gap below this, on data that fit well: refused as ambiguous (3).
+    pub refuse_quadric_gap: f32,
+    /// The radial RMS below which the quadric gap is judged (0.05).
+    pub gap_noise_limit: f32,
+    /// Quadric gap below this: a warning (10).
+    pub warn_quadric_gap: f32,
+    /// Condition number of `M` above this: refused (16).
+    pub refuse_distortion: f32,
+    /// Coverage below this: refused (0.05).
+    pub refuse_coverage: f32,
+    /// Gram condition above this: a warning (20).
+    pub warn_gram_condition: f32,
+    /// Relative field-strength deviation above this: refused (0.25).
+    pub refuse_field_deviation: f32,
+    /// Spread below this many noise deviations: a warning (10).
+    pub warn_spread_over_noise: f32,
+    /// Fit error above this: refused as no sphere (0.2).
+    pub refuse_fit_error: f32,
+    /// Fit error above this: a warning (0.05).
+    pub warn_fit_error: f32,
+    /// Share of rows left out above this: refused (0.25).
+    pub refuse_outlier_share: f32,
+    /// Lack of fit above this (and significant): refused (0.01).
+    pub refuse_lack_of_fit: f32,
+}
+
+impl From<Thresholds> for MagcalThresholds {
+    fn from(t: Thresholds) -> Self {
+        Self {
+            warn_samples: to_u32(t.warn_samples),
+            refuse_flatness: t.refuse_flatness,
+            warn_flatness: t.warn_flatness,
+            refuse_quadric_gap: t.refuse_quadric_gap,
+            gap_noise_limit: t.gap_noise_limit,
+            warn_quadric_gap: t.warn_quadric_gap,
+            refuse_distortion: t.refuse_distortion,
+            refuse_coverage: t.refuse_coverage,
+            warn_gram_condition: t.warn_gram_condition,
+            refuse_field_deviation: t.refuse_field_deviation,
+            warn_spread_over_noise: t.warn_spread_over_noise,
+            refuse_fit_error: t.refuse_fit_error,
+            warn_fit_error: t.warn_fit_error,
+            refuse_outlier_share: t.refuse_outlier_share,
+            refuse_lack_of_fit: t.refuse_lack_of_fit,
+        }
+    }
+}
+
+impl MagcalThresholds {
+    fn to_core(self) -> Thresholds {
+        Thresholds {
+            warn_samples: self.warn_samples as usize,
+            refuse_flatness: self.refuse_flatness,
+            warn_flatness: self.warn_flatness,
+            refuse_quadric_gap: self.refuse_quadric_gap,
+            gap_noise_limit: self.gap_noise_limit,
+            warn_quadric_gap: self.warn_quadric_gap,
+            refuse_distortion: self.refuse_distortion,
+            refuse_coverage: self.refuse_coverage,
+            warn_gram_condition: self.warn_gram_condition,
+            refuse_field_deviation: self.refuse_field_deviation,
+            warn_spread_over_noise: self.warn_spread_over_noise,
+            refuse_fit_error: self.refuse_fit_error,
+            warn_fit_error: self.warn_fit_error,
+            refuse_outlier_share: self.refuse_outlier_share,
+            refuse_lack_of_fit: self.refuse_lack_of_fit,
+        }
+    }
+}
+
 /// What to run. Fill with `magcal_config_default`, then change fields.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -229,15 +310,8 @@ pub struct MagcalConfig {
     /// Per-axis noise standard deviation in sensor units when known, else
     /// 0 (for ADC1 and the spread warning).
     pub noise_sigma: f64,
-    /// Fit error (robust sigma of the radial residual, units of the field)
-    /// above which a fit is refused as no sphere (0.2).
-    pub refuse_fit_error: f32,
-    /// Share of rows left out above which a fit is refused (0.25).
-    pub refuse_outlier_share: f32,
-    /// Flatness below which the samples are refused as planar (0.03).
-    pub refuse_flatness: f32,
-    /// Coverage below which a fit is refused (0.05).
-    pub refuse_coverage: f32,
+    /// The judging limits.
+    pub thresholds: MagcalThresholds,
 }
 
 /// Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
@@ -258,10 +332,7 @@ pub unsafe extern "C" fn magcal_config_default(out: *mut MagcalConfig) -> Magcal
         max_passes: c.max_passes,
         expected_field_strength: 0.0,
         noise_sigma: 0.0,
-        refuse_fit_error: t.refuse_fit_error,
-        refuse_outlier_share: t.refuse_outlier_share,
-        refuse_flatness: t.refuse_flatness,
-        refuse_coverage: t.refuse_coverage,
+        thresholds: MagcalThresholds::from(t),
     };
     // SAFETY: `out` is checked for null; the caller owns it.
     match unsafe { out.as_mut() } {
@@ -292,13 +363,7 @@ impl MagcalConfig {
             _ => return Err(MagcalStatus::InvalidArgument),
         };
         let positive = |x: f64| (x > 0.0 && x.is_finite()).then_some(x);
-        let thresholds = Thresholds {
-            refuse_fit_error: self.refuse_fit_error,
-            refuse_outlier_share: self.refuse_outlier_share,
-            refuse_flatness: self.refuse_flatness,
-            refuse_coverage: self.refuse_coverage,
-            ..Thresholds::DEFAULT
-        };
+        let thresholds = self.thresholds.to_core();
         Ok(Config {
             method,
             ls,

@@ -380,10 +380,23 @@ fn ffi() {
         max_passes: 50,
         expected_field_strength: 0.0,
         noise_sigma: 0.0,
-        refuse_fit_error: 0.2,
-        refuse_outlier_share: 0.25,
-        refuse_flatness: 0.03,
-        refuse_coverage: 0.05,
+        thresholds: MagcalThresholds {
+            warn_samples: 50,
+            refuse_flatness: 0.03,
+            warn_flatness: 0.1,
+            refuse_quadric_gap: 3.0,
+            gap_noise_limit: 0.05,
+            warn_quadric_gap: 10.0,
+            refuse_distortion: 16.0,
+            refuse_coverage: 0.05,
+            warn_gram_condition: 20.0,
+            refuse_field_deviation: 0.25,
+            warn_spread_over_noise: 10.0,
+            refuse_fit_error: 0.2,
+            warn_fit_error: 0.05,
+            refuse_outlier_share: 0.25,
+            refuse_lack_of_fit: 0.01,
+        },
     };
     static mut RESULT: MaybeResult = MaybeResult([0; 64]);
     static mut COLLECTOR: MagcalCollector = MagcalCollector {
