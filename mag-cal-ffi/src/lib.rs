@@ -1027,3 +1027,95 @@ fn panic(_: &core::panic::PanicInfo) -> ! {
         core::hint::spin_loop();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::ffi::CStr;
+
+    fn config() -> MagcalConfig {
+        let mut c = core::mem::MaybeUninit::<MagcalConfig>::uninit();
+        // SAFETY: a valid pointer to writable memory of the type.
+        assert_eq!(
+            unsafe { magcal_config_default(c.as_mut_ptr()) },
+            MagcalStatus::Ok
+        );
+        // SAFETY: written above.
+        unsafe { c.assume_init() }
+    }
+
+    #[test]
+    fn every_status_has_its_own_sentence() {
+        let mut seen = std::collections::HashSet::new();
+        for s in MagcalStatus::ALL {
+            // SAFETY: the function returns static NUL-terminated strings.
+            let text = unsafe { CStr::from_ptr(magcal_error_str(s as i32)) };
+            assert!(seen.insert(text.to_owned()), "{s:?}");
+        }
+        // SAFETY: as above.
+        let unknown = unsafe { CStr::from_ptr(magcal_error_str(999)) };
+        assert_eq!(unknown.to_str(), Ok("unknown status"));
+    }
+
+    #[test]
+    fn null_pointers_and_unknown_values_are_refused() {
+        let c = config();
+        let mut out = core::mem::MaybeUninit::<MagcalResult>::uninit();
+        let samples = [[1i16, 2, 3]; 4];
+        // SAFETY: null or valid pointers throughout.
+        unsafe {
+            assert_eq!(
+                magcal_calibrate_i16(core::ptr::null(), 4, &c, out.as_mut_ptr()),
+                MagcalStatus::NullPointer
+            );
+            assert_eq!(
+                magcal_calibrate_i16(samples.as_ptr(), 4, core::ptr::null(), out.as_mut_ptr()),
+                MagcalStatus::NullPointer
+            );
+            let bad = MagcalConfig { method: 77, ..c };
+            assert_eq!(
+                magcal_calibrate_i16(samples.as_ptr(), 4, &bad, out.as_mut_ptr()),
+                MagcalStatus::InvalidArgument
+            );
+            assert_eq!(
+                magcal_calibrate_i16(samples.as_ptr(), 4, &c, out.as_mut_ptr()),
+                MagcalStatus::TooFewSamples
+            );
+            assert_eq!(magcal_heading_deg(core::ptr::null()), 0.0);
+            assert_eq!(
+                magcal_smoother_init(core::ptr::null_mut(), 5),
+                MagcalStatus::NullPointer
+            );
+            let mut buf = [0u8; 10];
+            let cal = MagcalCalibration {
+                hard_iron: [0.0; 3],
+                soft_iron: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                field_strength: 1.0,
+            };
+            assert_eq!(
+                magcal_to_bytes(&cal, buf.as_mut_ptr(), buf.len()),
+                MagcalStatus::InvalidArgument
+            );
+        }
+    }
+
+    #[test]
+    fn the_smoother_averages_on_the_circle() {
+        let mut s = MagcalSmoother {
+            storage: [0; MAGCAL_SMOOTHER_WORDS],
+        };
+        let mut mean = 0.0f32;
+        // SAFETY: valid pointers to owned values.
+        unsafe {
+            assert_eq!(
+                magcal_smoother_init(&mut s, 0),
+                MagcalStatus::InvalidArgument
+            );
+            assert_eq!(magcal_smoother_init(&mut s, 4), MagcalStatus::Ok);
+            for h in [179.0, -179.0, 179.0, -179.0] {
+                assert_eq!(magcal_smoother_push(&mut s, h, &mut mean), MagcalStatus::Ok);
+            }
+        }
+        assert!((mean.abs() - 180.0).abs() < 1e-3, "{mean}");
+    }
+}
