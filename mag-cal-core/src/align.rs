@@ -3,7 +3,7 @@
 //!
 //! A calibration fixes `u = W (y - b)` only up to a rotation: the data
 //! determine `M = W^T W` and `b`, never the orientation of the calibrated
-//! frame (design document, section 1). Where the true field directions
+//! frame. Where the true field directions
 //! `h_i` of some readings are known (a reference instrument, a rig, or the
 //! simulation's truth), [`procrustes`] finds the proper rotation `Q` that
 //! best maps the calibrated readings onto them, and [`AlignedCalibration`]

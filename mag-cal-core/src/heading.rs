@@ -1,5 +1,5 @@
 //! Heading from calibrated readings, tilt compensation and circular
-//! smoothing (design document, section 9).
+//! smoothing.
 //!
 //! Conventions: the body frame has x forward, y right, z down (right-handed,
 //! as NED); the heading is the angle from magnetic north to the body's x
@@ -27,7 +27,7 @@ use nalgebra::Vector3;
 
 use crate::{Error, Real};
 
-/// Window the paper found best among 3..67 (design document, section 9).
+/// Window the paper's heading test found best among 3..67.
 pub const DEFAULT_WINDOW: usize = 15;
 
 /// Degrees per radian, rounded once from `f64` (more accurate in `f32` than

@@ -411,9 +411,8 @@ pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<F
 /// this many robust standard deviations, in the method's pass and in the
 /// final pass. Beyond it a row cannot be Gaussian noise of that sigma
 /// (probability 6e-7 a row); below it, the 0/1 weights at
-/// [`methods::OUTLIER_CUT`] would leave out rows that move the fit by less
-/// than the noise. Clean data then pay no robust pass
-/// (`docs/benchmarks.md`).
+/// [`OUTLIER_CUT`] would leave out rows that move the fit by less than the
+/// noise. Clean data then pay no robust pass.
 pub const CLEAN_LIMIT: f64 = 5.0;
 
 /// A plain fit is taken as the robust one only when the RMS of its radial

@@ -1,5 +1,5 @@
-//! Quality figures of a calibration, the degenerate-geometry checks of the
-//! design document's section 12, and the warnings a report carries.
+//! Quality figures of a calibration, the refusals of degenerate data, and
+//! the warnings a report carries.
 //!
 //! Every check is relative (unit-free); the thresholds and the measurements
 //! that justify them are documented beside each constant. Refusals are
@@ -38,7 +38,7 @@ pub struct Quality<T: Real> {
     /// they start from (the statistics
     /// already summed, so the last pass need not sum them again);
     /// for the other methods, those of the final calibration. On the
-    /// design document's scenarios A-G the two differ by at most 2 % (0.05 %
+    /// simulated test scenarios the two differ by at most 2 % (0.05 %
     /// to 0.6 % except the noisiest, E).
     pub coverage: T,
     /// Condition number of `G / n`, the Gram matrix of the regressors
@@ -72,14 +72,14 @@ pub const WARN_SAMPLES: usize = 50;
 /// Flatness below this: [`Error::Planar`]. A single planar circle gives
 /// 0.004 and the real nearly planar recording `planar_243.txt` 0.010; a
 /// +-10 deg band 0.02 (also refused by coverage); a +-30 deg band 0.18
-/// (0.10-0.15 after the distortions of the design document's scenarios).
+/// (0.10-0.15 after the simulated test scenarios' distortions).
 pub const REFUSE_FLATNESS: f64 = 0.03;
 /// Flatness below this: [`Warning::NearlyPlanar`].
 pub const WARN_FLATNESS: f64 = 0.1;
 /// Quadric gap below this, on data that fit their ellipsoid to within
 /// [`GAP_NOISE_LIMIT`]: [`Error::AmbiguousQuadric`].
 ///
-/// Measured (scenario T and b of the design document, 1000 samples, 20
+/// Measured (a simulated sensor with a tilted soft iron, 1000 samples, 20
 /// runs each): two orthogonal great circles give gaps of 1.8-2.5 at every
 /// noise level (0.3 %, noise A, noise B) and errors in `M` of 18-22 %:
 /// a second quadric fits as well as the first, whatever the noise, so the
@@ -99,7 +99,7 @@ pub const GAP_NOISE_LIMIT: f64 = 0.05;
 pub const WARN_QUADRIC_GAP: f64 = 10.0;
 /// Condition of `M` above this: [`Error::ExtremeDistortion`]. It is an
 /// axis ratio of 4; magnetometer soft iron and scale errors stay within a
-/// few tens of percent (the design document's scenarios: 2.7).
+/// few tens of percent (the simulated test scenarios: 2.7).
 pub const REFUSE_DISTORTION: f64 = 16.0;
 /// Coverage below this: [`Error::PoorCoverage`]. Full sphere 0.31-0.33,
 /// +-30 deg band 0.085, +-10 deg band 0.02, a 45 deg cap 0.03 (which passes
@@ -118,16 +118,16 @@ pub const WARN_SPREAD_OVER_NOISE: f64 = 10.0;
 
 /// Fit error above this: [`Warning::HighFitError`].
 pub const WARN_FIT_ERROR: f64 = 0.05;
-/// Fit error above this: [`Error::NoSphere`]. Measured (design document,
-/// section 14, 5th-95th percentiles): scenario E 0.13-0.16, isotropic 20 %
+/// Fit error above this: [`Error::NoSphere`]. Measured in simulation
+/// (5th-95th percentiles): noise of 10-20 % per axis 0.13-0.16, isotropic 20 %
 /// noise on a real sphere 0.18-0.19; a filled ball 0.24-0.27, a cube
 /// 0.28-0.30, a stationary device or a blob 0.37-0.44.
 pub const REFUSE_FIT_ERROR: f64 = 0.20;
 /// Share of rows not used above this: [`Error::TooManyOutliers`].
 pub const REFUSE_OUTLIER_SHARE: f64 = 0.25;
 /// Lack of fit above this (1 % of the field), significant against the
-/// noise: [`Error::SystematicMisfit`]. Measured on the contamination study
-/// (`docs/results.md`): fits that a displaced patch or a moving
+/// noise: [`Error::SystematicMisfit`]. Measured on a simulated
+/// contamination study: fits that a displaced patch or a moving
 /// disturbance bent to `e_M` above 0.05 have 0.006-0.04; accepted good fits
 /// of the same data 0.002-0.012; real recordings 0.003-0.011 with the plain
 /// fit, 0.003-0.005 with outlier handling.

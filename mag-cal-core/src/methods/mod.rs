@@ -162,7 +162,7 @@ impl<T: Real> Weights<T> {
 /// Rows whose residual exceeds this many robust standard deviations get
 /// weight 0. Hard 0/1 weights: Tukey's smooth weights took 4 more passes
 /// for the same result; a 3-sigma cut cost 2-8 % of the clean accuracy,
-/// 3.5 sigma at most 2.2 % (design document, section 14).
+/// 3.5 sigma at most 2.2 % (measured in simulation).
 pub const OUTLIER_CUT: f64 = 3.5;
 
 /// The artificial-data pass under the start `(centre, w)` with the 0/1
