@@ -101,6 +101,14 @@ pub enum Error {
     },
     /// Stored calibration bytes fail their checksum.
     ChecksumMismatch,
+    /// An offsets-only fit: the readings' directions cover too small a cap
+    /// to determine the offsets ([`crate::offsets`]).
+    OffsetsUndetermined {
+        /// Smallest over largest eigenvalue of the normal matrix.
+        determinacy: Figure,
+        /// The limit it is below.
+        limit: Figure,
+    },
 }
 
 impl fmt::Display for Error {
@@ -172,6 +180,10 @@ impl fmt::Display for Error {
                 write!(f, "stored calibration has unsupported format version {found}")
             }
             Error::ChecksumMismatch => f.write_str("stored calibration fails its checksum"),
+            Error::OffsetsUndetermined { determinacy, limit } => write!(
+                f,
+                "the readings cover too few directions to determine the offsets (determinacy {determinacy:.3}, limit {limit:.3}): turn the sensor further"
+            ),
         }
     }
 }

@@ -137,7 +137,8 @@
 //! # Around the fit
 //!
 //! [`collector`] gathers samples one at a time on the device, with
-//! coverage and progress; [`SampleStore`] is a plain fixed-capacity store;
+//! coverage and progress; [`offsets`] re-estimates the hard iron alone
+//! when the soft iron is known, from a part of the sphere; [`SampleStore`] is a plain fixed-capacity store;
 //! [`persist`] stores a calibration as 92 checksummed bytes.
 //!
 //! # Cost
@@ -207,6 +208,7 @@ mod linalg;
 mod methods;
 mod moments;
 mod normalize;
+pub mod offsets;
 pub mod persist;
 pub mod quality;
 mod quasi_newton;

@@ -257,6 +257,25 @@ fn calibration<T: Real>(scalars: &'static Scalars<T>) {
         }
         keep(aligned);
     }
+    // Offsets-only refits of that calibration on the samples.
+    if let Ok(cal) = &cal {
+        for strength in [
+            mag_cal_core::offsets::Strength::Unchanged,
+            mag_cal_core::offsets::Strength::Unknown,
+        ] {
+            let strength = opaque(&strength);
+            keep(mag_cal_core::offsets::refit_offsets(
+                SAMPLES_I16.get(),
+                cal,
+                strength,
+            ));
+            keep(mag_cal_core::offsets::refit_offsets(
+                SAMPLES_F32.get(),
+                cal,
+                strength,
+            ));
+        }
+    }
     keep(cal);
 }
 
@@ -427,18 +446,52 @@ fn ffi() {
         keep(magcal_config_default(&mut config_out));
         let n_i16 = count.min(samples_i16.len());
         let n_f32 = count.min(samples_f32.len());
-        keep(magcal_calibrate_i16(maybe_null(samples_i16.as_ptr()), n_i16, &config, result));
-        keep(magcal_calibrate_f32(maybe_null(samples_f32.as_ptr()), n_f32, &config, result));
-        keep(magcal_calibrate_i16_f64(maybe_null(samples_i16.as_ptr()), n_i16, &config, result));
-        keep(magcal_calibrate_f32_f64(maybe_null(samples_f32.as_ptr()), n_f32, &config, result));
+        keep(magcal_calibrate_i16(
+            maybe_null(samples_i16.as_ptr()),
+            n_i16,
+            &config,
+            result,
+        ));
+        keep(magcal_calibrate_f32(
+            maybe_null(samples_f32.as_ptr()),
+            n_f32,
+            &config,
+            result,
+        ));
+        keep(magcal_calibrate_i16_f64(
+            maybe_null(samples_i16.as_ptr()),
+            n_i16,
+            &config,
+            result,
+        ));
+        keep(magcal_calibrate_f32_f64(
+            maybe_null(samples_f32.as_ptr()),
+            n_f32,
+            &config,
+            result,
+        ));
         let cal = maybe_null(addr_of!((*result).calibration));
         keep(magcal_apply(cal, raw, out3));
         keep(magcal_heading_deg(raw));
-        keep(magcal_tilt_heading_deg(raw, maybe_null(SCALARS_F32.accel.as_ptr()), out3));
+        keep(magcal_tilt_heading_deg(
+            raw,
+            maybe_null(SCALARS_F32.accel.as_ptr()),
+            out3,
+        ));
         keep(magcal_smoother_init(addr_of_mut!(SMOOTHER), count as u32));
-        keep(magcal_smoother_push(addr_of_mut!(SMOOTHER), opaque(&SCALARS_F32.raw[0]), out3));
-        keep(magcal_collector_init(addr_of_mut!(COLLECTOR), opaque(&ANGLE)));
-        keep(magcal_collector_offer(addr_of_mut!(COLLECTOR), maybe_null(BUF_I16[0].as_ptr())));
+        keep(magcal_smoother_push(
+            addr_of_mut!(SMOOTHER),
+            opaque(&SCALARS_F32.raw[0]),
+            out3,
+        ));
+        keep(magcal_collector_init(
+            addr_of_mut!(COLLECTOR),
+            opaque(&ANGLE),
+        ));
+        keep(magcal_collector_offer(
+            addr_of_mut!(COLLECTOR),
+            maybe_null(BUF_I16[0].as_ptr()),
+        ));
         let mut progress = MagcalProgress {
             samples: 0,
             cells_visited: 0,
@@ -446,13 +499,20 @@ fn ffi() {
             percent: 0,
             ready: false,
         };
-        keep(magcal_collector_progress(addr_of!(COLLECTOR), &mut progress));
+        keep(magcal_collector_progress(
+            addr_of!(COLLECTOR),
+            &mut progress,
+        ));
         let mut n = 0usize;
         keep(magcal_collector_samples(addr_of!(COLLECTOR), &mut n));
         let record = addr_of_mut!(RECORD).cast::<u8>();
         keep(magcal_to_bytes(cal, record, count));
         let bytes = BYTES.get();
-        keep(magcal_from_bytes(maybe_null(bytes.as_ptr()), bytes.len(), addr_of_mut!((*result).calibration)));
+        keep(magcal_from_bytes(
+            maybe_null(bytes.as_ptr()),
+            bytes.len(),
+            addr_of_mut!((*result).calibration),
+        ));
         keep(magcal_error_str(opaque(&SCALARS_F32.window) as i32));
     }
 }
