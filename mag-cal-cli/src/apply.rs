@@ -192,7 +192,7 @@ fn optional(v: Option<f64>) -> String {
 }
 
 /// Parses a calibration file: the JSON object of `fit --format json`.
-fn read_json(bytes: &[u8], name: &str) -> Result<Value, CliError> {
+pub(crate) fn read_json(bytes: &[u8], name: &str) -> Result<Value, CliError> {
     let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
     let value: Value = serde_json::from_slice(bytes)
         .map_err(|err| bad(format!("not a calibration (invalid JSON: {err})")))?;
@@ -223,7 +223,10 @@ fn parameters(value: &Value) -> Result<([f64; 3], [[f64; 3]; 3]), String> {
 
 /// Rebuilds the calibration from the JSON object of `fit --format json`:
 /// its `hard_iron` and `soft_iron`; other fields are ignored.
-fn calibration_from_value(value: &Value, name: &str) -> Result<Calibration<f64>, CliError> {
+pub(crate) fn calibration_from_value(
+    value: &Value,
+    name: &str,
+) -> Result<Calibration<f64>, CliError> {
     let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
     let (b, w) = parameters(value).map_err(bad)?;
     Calibration::from_nalgebra(Vector3::from(b), Matrix3::from_fn(|r, c| w[r][c])).map_err(|err| {

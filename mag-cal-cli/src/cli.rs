@@ -71,6 +71,8 @@ pub enum Command {
     Fit(FitArgs),
     /// Apply a calibration (from 'magcal fit --format json') to a file of raw samples
     Apply(ApplyArgs),
+    /// Re-estimate only the hard iron of a calibration from a file of raw samples
+    Offsets(OffsetsArgs),
 }
 
 /// Options of `magcal fit`.
@@ -153,6 +155,64 @@ marks every finite row used, and a note on stderr says so.
 Exit status: 0 success, 2 usage, I/O, parse or calibration-file error.";
 
 /// Largest `--window`: the capacity of the heading smoother.
+const OFFSETS_AFTER_HELP: &str = "\
+Keeps the soft iron of CAL.json (what 'magcal fit --format json' prints) and
+re-estimates the hard iron from FILE (read as by 'magcal fit'), e.g. after a
+part was magnetised. The readings need not cover the sphere: with the field
+strength known (--strength known, the default) a cap of directions of about
+20 deg half-angle determines the offsets; with it unknown, about a
+hemisphere. Too small a cap is refused (exit 3) with its determinacy.
+
+Output: the calibration (hard_iron, soft_iron, field_strength: what 'magcal
+apply' reads) and the fit's figures.
+
+Exit status: 0 success, 2 usage, I/O, parse or calibration-file error,
+3 refused.";
+
+/// `magcal offsets` arguments.
+#[derive(Debug, Args)]
+#[command(after_help = OFFSETS_AFTER_HELP)]
+pub struct OffsetsArgs {
+    /// Calibration JSON whose soft iron is kept
+    #[arg(value_name = "CAL.json")]
+    pub calibration: PathBuf,
+
+    /// Raw samples ('-' for stdin)
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+
+    /// Whether the field strength is that of CAL.json
+    #[arg(long, value_enum, default_value_t = StrengthArg::Known)]
+    pub strength: StrengthArg,
+
+    /// Output format
+    #[arg(long, value_enum, default_value_t = Format::Text)]
+    pub format: Format,
+
+    /// Magnetometer columns by header name
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
+    pub columns: Option<Columns>,
+}
+
+/// `--strength`: what is known of the field strength.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum StrengthArg {
+    /// That of the calibration (three unknowns)
+    Known,
+    /// Unknown (four unknowns; needs about a hemisphere)
+    Unknown,
+}
+
+impl StrengthArg {
+    /// The flag's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            StrengthArg::Known => "known",
+            StrengthArg::Unknown => "unknown",
+        }
+    }
+}
+
 pub const MAX_WINDOW: usize = 128;
 
 /// Options of `magcal apply`.

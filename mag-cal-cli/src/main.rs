@@ -28,6 +28,7 @@ mod cli;
 mod error;
 mod fit;
 mod input;
+mod offsets;
 mod output;
 mod selection;
 mod svg;
@@ -71,6 +72,7 @@ fn run(cli: Cli) -> Result<Vec<String>, CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(&args, &mut std::io::stdout().lock()),
         Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),
+        Command::Offsets(args) => offsets::run(&args, &mut std::io::stdout().lock()),
     }
 }
 

@@ -1865,3 +1865,78 @@ fn fit_json_deserialises_as_a_core_calibration() {
         assert!(back.get(key).is_some(), "{key} in {back}");
     }
 }
+
+/// `magcal offsets`: the soft iron of a fit kept, a moved hard iron found
+/// from the same readings shifted; a cluster of readings around one
+/// direction refused with its determinacy (exit 3).
+#[test]
+fn offsets_follow_a_moved_hard_iron_and_refuse_a_cluster() {
+    let fit = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    );
+    let before = fit.json();
+    let cal = temp_file("offsets-cal.json", fit.stdout.as_bytes());
+    let text = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
+    let shift = [30.0, -20.0, 10.0];
+    let mut shifted = String::new();
+    for line in text.lines() {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|f| f.trim().parse().expect("numbers"))
+            .collect();
+        shifted.push_str(&format!(
+            "{},{},{}\n",
+            v[0] + shift[0],
+            v[1] + shift[1],
+            v[2] + shift[2]
+        ));
+    }
+    let file = temp_file("offsets-shifted.csv", shifted.as_bytes());
+    let run = magcal(&["offsets", &cal, &file, "--format", "json"], None);
+    let after = run.json();
+    for (i, d) in shift.iter().enumerate() {
+        let moved =
+            after["hard_iron"][i].as_f64().unwrap() - before["hard_iron"][i].as_f64().unwrap();
+        assert!(
+            (moved - d).abs() < 0.5,
+            "axis {i}: moved {moved}, shifted {d}"
+        );
+    }
+    // The soft iron kept (to the rounding of reading it back).
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, b) = (
+                after["soft_iron"][i][j].as_f64().unwrap(),
+                before["soft_iron"][i][j].as_f64().unwrap(),
+            );
+            assert!((a - b).abs() <= 1e-12 * 0.003, "W[{i}][{j}] {a} vs {b}");
+        }
+    }
+    assert_eq!(
+        after["samples_used"].as_u64().unwrap() + after["rejected"].as_u64().unwrap(),
+        300
+    );
+    // The text report says the same.
+    let text_run = magcal(&["offsets", &cal, &file], None);
+    assert_eq!(text_run.code, 0, "{}", text_run.stderr);
+    assert!(
+        text_run.stdout.contains("determinacy"),
+        "{}",
+        text_run.stdout
+    );
+    // Readings around one direction do not determine the offsets.
+    let mut cluster = String::new();
+    for i in 0..60 {
+        cluster.push_str(&format!(
+            "{},{},{}\n",
+            100 + i % 4,
+            -150 + i % 3,
+            200 + i % 5
+        ));
+    }
+    let file = temp_file("offsets-cluster.csv", cluster.as_bytes());
+    let refused = magcal(&["offsets", &cal, &file], None);
+    assert_eq!(refused.code, 3, "{}", refused.stdout);
+    assert!(refused.stderr.contains("determin"), "{}", refused.stderr);
+}

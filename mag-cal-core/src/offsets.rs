@@ -74,7 +74,7 @@ const CUT_PASSES: u32 = 3;
 /// the field per axis, medians of 20 runs): with the strength known the
 /// determinacy is 0.16 at 45 deg, 0.029 at 20 deg (`e_b` 0.005 of the
 /// field) and 0.016 at 15 deg (refused); with it unknown, 0.066 at 90 deg
-/// (`e_b` 0.003) and 0.007 at 60 deg (refused). A full calibration
+/// (`e_b` 0.003) and 0.008 at 60 deg (refused). A full calibration
 /// refuses every cap of 60 deg or less.
 pub const REFUSE_DETERMINACY: f64 = 0.02;
 
@@ -150,8 +150,9 @@ pub fn refit_offsets<T: Real, S: Sample>(
             let mut determinacy = T::zero();
             for _ in 0..2 {
                 let pass = state.pass(samples, PassKind::Linear)?;
-                let (centre, ratio) = pass.solution.ok_or(Error::SingularSystem)?;
                 determinacy = pass.determinacy;
+                undetermined(determinacy)?;
+                let (centre, ratio) = pass.solution.ok_or(Error::SingularSystem)?;
                 state.limit = pass.sigma.map(|s| s * T::lit(OUTLIER_CUT));
                 state.centre = centre;
                 state.radius = ratio;
@@ -164,6 +165,9 @@ pub fn refit_offsets<T: Real, S: Sample>(
             for iteration in 0..MAX_ITERATIONS {
                 let pass = state.pass(samples, PassKind::GaussNewton)?;
                 determinacy = pass.determinacy;
+                // The geometry hardly changes with the centre: an
+                // undetermined problem is refused at once, not iterated.
+                undetermined(determinacy)?;
                 let (centre, _) = pass.solution.ok_or(Error::SingularSystem)?;
                 let step = (centre - state.centre).amax();
                 state.centre = centre;
@@ -189,12 +193,7 @@ pub fn refit_offsets<T: Real, S: Sample>(
             (state.centre, T::one(), determinacy)
         }
     };
-    if !(determinacy >= T::lit(REFUSE_DETERMINACY)) {
-        return Err(Error::OffsetsUndetermined {
-            determinacy: Figure::new(determinacy.to_single()),
-            limit: Figure::new(REFUSE_DETERMINACY as f32),
-        });
-    }
+    undetermined(determinacy)?;
     // b = W^-1 c; the soft iron scaled by the strength ratio.
     let b = w.try_inverse().ok_or(Error::SingularSystem)? * centre;
     let w_new = w * (T::one() / ratio);
@@ -214,6 +213,18 @@ pub fn refit_offsets<T: Real, S: Sample>(
         rejected: last.rejected,
         fit_error: last.sigma.unwrap_or(T::zero()),
     })
+}
+
+/// [`Error::OffsetsUndetermined`] below [`REFUSE_DETERMINACY`].
+fn undetermined<T: Real>(determinacy: T) -> Result<(), Error> {
+    if determinacy >= T::lit(REFUSE_DETERMINACY) {
+        Ok(())
+    } else {
+        Err(Error::OffsetsUndetermined {
+            determinacy: Figure::new(determinacy.to_single()),
+            limit: Figure::new(REFUSE_DETERMINACY as f32),
+        })
+    }
 }
 
 #[derive(Clone, Copy, PartialEq)]
