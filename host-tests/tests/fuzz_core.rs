@@ -58,6 +58,7 @@ use host_tests::sim;
 use mag_cal_core::align::{procrustes, AlignedCalibration};
 use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, wrap_deg, HeadingSmoother};
+use mag_cal_core::offsets::{refit_offsets, Strength};
 use mag_cal_core::{
     calibrate, persist, Calibration, Config, Error, Fit, LsVariant, Method, Real, Sample,
     SampleStore, Thresholds, MIN_SAMPLES,
@@ -778,6 +779,18 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
         let _ = cal.apply(counts);
         let _ = cal.apply_scaled(raw);
         let _ = cal.shape();
+        // Offsets-only refits of this calibration on arbitrary readings:
+        // a result or an error, never a panic, and a result is finite.
+        let n = rng.length();
+        let readings: Vec<[f64; 3]> = (0..n).map(|_| rng.any_vec3()).collect();
+        for strength in [Strength::Unchanged, Strength::Unknown] {
+            if let Ok(fit) = refit_offsets::<T, _>(&readings, &cal, strength) {
+                let b = fit.calibration.hard_iron();
+                if !b.iter().all(|v| v.is_finite()) || !fit.determinacy.is_finite() {
+                    return Err(format!("refit_offsets: non-finite result {fit:?}"));
+                }
+            }
+        }
         // A rotation, a nearly-rotation, or garbage.
         let r = match rng.below(3) {
             0 => Matrix3::from_fn(|_, _| t(rng.any_f64())),
