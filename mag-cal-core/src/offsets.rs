@@ -54,7 +54,9 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::histogram::LogHistogram;
-use crate::linalg::{cholesky, cholesky_solve, min_max, sym_eigenvalues};
+use crate::linalg::{
+    cholesky, cholesky_solve, columns_of, from_columns, inverse3, min_max, sym_eigenvalues,
+};
 use crate::methods::{robust_sigma, OUTLIER_CUT};
 use crate::rules::{check, Rules};
 use crate::sample::Sample;
@@ -193,15 +195,18 @@ pub fn refit_offsets<T: Real, S: Sample>(
             (state.centre, T::one(), determinacy)
         }
     };
-    undetermined(determinacy)?;
-    // b = W^-1 c; the soft iron scaled by the strength ratio.
-    let b = w.try_inverse().ok_or(Error::SingularSystem)? * centre;
+    // b = W^-1 c (W symmetric: its columns are its rows); the soft iron
+    // scaled by the strength ratio.
+    let t = inverse3(&columns_of(&w)).ok_or(Error::SingularSystem)?;
+    let b = from_columns(t) * centre;
     let w_new = w * (T::one() / ratio);
     let calibration = Calibration::from_canonical(b, w_new)?;
-    // The figures under the result: one more pass.
+    // The figures under the result: one more pass, with the last cut in
+    // the new scale (residuals divide by the ratio with W).
     state.w = w_new;
     state.centre = w_new * b;
     state.radius = T::one();
+    state.limit = state.limit.map(|l| l / ratio);
     let last = state.pass(samples, PassKind::Residuals)?;
     Ok(OffsetsFit {
         calibration,
