@@ -4,6 +4,7 @@
 //! each row.
 
 use std::io::{BufWriter, Write};
+use std::path::Path;
 
 use mag_cal_core::heading::{tilt_compensated_heading_deg, HeadingSmoother};
 use mag_cal_core::{Calibration, Real, SampleClass};
@@ -20,13 +21,7 @@ use crate::selection::{class_name, SelectionJson};
 /// Returns notes for stderr: when the sample columns were found in the
 /// header, and when `--flags` found no `selection` in the calibration.
 pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
-    let cal_source = Source::from_arg(&args.calibration);
-    let source = Source::from_arg(&args.file);
-    if cal_source == Source::Stdin && source == Source::Stdin {
-        return Err(CliError::Input(
-            "CAL.json and FILE cannot both be '-' (stdin)".into(),
-        ));
-    }
+    let (cal_source, source) = sources(&args.calibration, &args.file)?;
     let cal_name = cal_source.name();
     let cal_json = read_json(&cal_source.read()?, &cal_name)?;
     let cal = calibration_from_value(&cal_json, &cal_name)?;
@@ -192,6 +187,19 @@ fn optional(v: Option<f64>) -> String {
 }
 
 /// Parses a calibration file: the JSON object of `fit --format json`.
+/// The sources of a calibration file and a sample file, which cannot both
+/// be stdin.
+pub(crate) fn sources(calibration: &Path, file: &Path) -> Result<(Source, Source), CliError> {
+    let cal_source = Source::from_arg(calibration);
+    let source = Source::from_arg(file);
+    if cal_source == Source::Stdin && source == Source::Stdin {
+        return Err(CliError::Input(
+            "CAL.json and FILE cannot both be '-' (stdin)".into(),
+        ));
+    }
+    Ok((cal_source, source))
+}
+
 pub(crate) fn read_json(bytes: &[u8], name: &str) -> Result<Value, CliError> {
     let bad = |what: String| CliError::Input(format!("{}: {what}", one_line(name)));
     let value: Value = serde_json::from_slice(bytes)

@@ -7,20 +7,14 @@ use std::io::Write;
 use mag_cal_core::offsets::{refit_offsets, Strength};
 use serde_json::json;
 
-use crate::apply::{calibration_from_value, read_json};
+use crate::apply::{calibration_from_value, read_json, sources};
 use crate::cli::{Format, OffsetsArgs, StrengthArg};
 use crate::error::CliError;
-use crate::input::{self, Source};
+use crate::input;
 
 /// Runs `magcal offsets`.
 pub fn run(args: &OffsetsArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
-    let cal_source = Source::from_arg(&args.calibration);
-    let source = Source::from_arg(&args.file);
-    if cal_source == Source::Stdin && source == Source::Stdin {
-        return Err(CliError::Input(
-            "CAL.json and FILE cannot both be '-' (stdin)".into(),
-        ));
-    }
+    let (cal_source, source) = sources(&args.calibration, &args.file)?;
     let cal_name = cal_source.name();
     let previous = calibration_from_value(&read_json(&cal_source.read()?, &cal_name)?, &cal_name)?;
     let table = input::parse(&source.read()?, args.columns.as_ref(), &source.name())?;
