@@ -140,7 +140,7 @@ impl<T: Real> Stats<T> {
         w: &Matrix3<T>,
     ) -> Result<(Self, T), Error> {
         let mut tails = [T::zero(); 2];
-        let stats = Self::from_pass(samples, norm, centre, w, Err(&mut tails))?;
+        let stats = Self::from_pass(samples, norm, centre, w, Measure::Tails(&mut tails))?;
         let [s2, s4] = tails;
         let kurtosis = if s2 > T::zero() {
             T::from_count(stats.count) * s4 / (s2 * s2)
@@ -162,16 +162,16 @@ impl<T: Real> Stats<T> {
         pass: &Pass<'_, T>,
         residuals: &mut Residuals<T>,
     ) -> Result<Self, Error> {
-        Self::from_pass(samples, norm, centre, w, Ok((pass, residuals)))
+        Self::from_pass(samples, norm, centre, w, Measure::Gated(pass, residuals))
     }
 
-    /// The pass: plain (`None`), or gated, weighted and measured.
+    /// The pass: plain, or gated, weighted and measured.
     fn from_pass<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         centre: &Vector3<T>,
         w: &Matrix3<T>,
-        weighted: Result<(&Pass<'_, T>, &mut Residuals<T>), &mut [T; 2]>,
+        weighted: Measure<'_, '_, T>,
     ) -> Result<Self, Error> {
         let mut total = [T::zero(); SUMS];
         let map = Projector::new(norm, centre, w);
@@ -274,6 +274,15 @@ impl<T: Real> Residuals<T> {
     }
 }
 
+/// What a pass measures beside its sums.
+enum Measure<'a, 'p, T: Real> {
+    /// The plain pass (every finite row, weight 1): the sums of `e^2` and
+    /// `e^4` of the algebraic residuals.
+    Tails(&'a mut [T; 2]),
+    /// A gated pass: its gate and cut, and the residuals it measures.
+    Gated(&'a Pass<'p, T>, &'a mut Residuals<T>),
+}
+
 /// Adds the [`SUMS`] sums of the samples to `total` (zeros on entry), in
 /// blocks of [`BLOCK`] samples, and returns the count of the samples with a
 /// direction. Not inlined: the buffer of directions is then the only large
@@ -282,7 +291,7 @@ impl<T: Real> Residuals<T> {
 fn sums<T: Real, S: Sample>(
     samples: &[S],
     map: &Projector<T>,
-    mut weighted: Result<(&Pass<'_, T>, &mut Residuals<T>), &mut [T; 2]>,
+    mut weighted: Measure<'_, '_, T>,
     total: &mut [T; SUMS],
 ) -> usize {
     let mut count = 0usize;
@@ -293,9 +302,9 @@ fn sums<T: Real, S: Sample>(
         let mut a = [T::zero(); SUMS];
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);
-            count += match weighted.as_mut() {
-                Err(tails) => plain_directions(chunk, map, tails, &mut buf),
-                Ok((pass, res)) => directions(chunk, prev, map, pass, res, &mut buf),
+            count += match &mut weighted {
+                Measure::Tails(tails) => plain_directions(chunk, map, tails, &mut buf),
+                Measure::Gated(pass, res) => directions(chunk, prev, map, pass, res, &mut buf),
             };
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
