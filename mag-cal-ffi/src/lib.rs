@@ -661,15 +661,14 @@ pub unsafe extern "C" fn magcal_apply(
     if out.is_null() || !out.is_aligned() {
         return MagcalStatus::NullPointer;
     }
-    let [bx, by, bz] = c.hard_iron;
-    let d = [
-        f64::from(y[0]) - bx,
-        f64::from(y[1]) - by,
-        f64::from(y[2]) - bz,
-    ];
-    let u = c
-        .soft_iron
-        .map(|row| (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32);
+    // In float, as documented: per reading on a Cortex-M4F, double would be
+    // software floating point (and its code linked for this call alone).
+    let [bx, by, bz] = c.hard_iron.map(|v| v as f32);
+    let d = [y[0] - bx, y[1] - by, y[2] - bz];
+    let u = c.soft_iron.map(|row| {
+        let [w0, w1, w2] = row.map(|v| v as f32);
+        w0 * d[0] + w1 * d[1] + w2 * d[2]
+    });
     // SAFETY: checked above.
     unsafe { write3(out, u) };
     MagcalStatus::Ok
