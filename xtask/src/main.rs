@@ -334,19 +334,7 @@ fn c_tests() -> Result<(), String> {
         &["build", "--release", "--locked", "-p", "mag-cal-cli"],
     )?;
     // The C libraries (the crate is an rlib by its manifest).
-    run(
-        &root,
-        "cargo",
-        &[
-            "rustc",
-            "--release",
-            "--locked",
-            "-p",
-            "mag-cal-ffi",
-            "--crate-type",
-            "staticlib,cdylib",
-        ],
-    )?;
+    ffi_libraries("staticlib,cdylib", &["--release"])?;
     let magcal = root.join("target/release/magcal");
     for precision in ["f64", "f32"] {
         let json = output(
@@ -389,34 +377,15 @@ fn c_tests() -> Result<(), String> {
 
     // Cortex-M4F: the static library for thumbv7em, newlib with
     // semihosting (the log and the JSON are read from the host), QEMU.
-    run(
-        &root,
-        "cargo",
-        &[
-            "rustc",
-            "--release",
-            "--locked",
-            "-p",
-            "mag-cal-ffi",
-            "--target",
-            "thumbv7em-none-eabihf",
-            "--crate-type",
-            "staticlib",
-        ],
+    ffi_libraries(
+        "staticlib",
+        &["--release", "--target", "thumbv7em-none-eabihf"],
     )?;
     let m4_lib = root.join("target/thumbv7em-none-eabihf/release/libmag_cal_ffi.a");
     let m4_bin = c_dir.join("calibrate-m4.elf");
     let cortex = root.join("mag-cal-ffi/c/cortex-m");
     let mut args: Vec<&str> = warnings.to_vec();
-    args.extend([
-        "-mcpu=cortex-m4",
-        "-mthumb",
-        "-mfloat-abi=hard",
-        "-mfpu=fpv4-sp-d16",
-        "--specs=rdimon.specs",
-        "-Wl,--gc-sections",
-        "-Wl,--no-warn-execstack",
-    ]);
+    args.extend(M4_CFLAGS);
     let (script, startup) = (cortex.join("link.ld"), cortex.join("startup.c"));
     args.extend([
         "-T",
@@ -441,26 +410,61 @@ fn c_tests() -> Result<(), String> {
         run(
             &root,
             "timeout",
-            &[
-                "300",
-                "qemu-system-arm",
-                "-cpu",
-                "cortex-m4",
-                "-machine",
-                "mps2-an386",
-                "-nographic",
-                "-monitor",
-                "none",
-                "-serial",
-                "none",
-                "-semihosting-config",
-                &semihosting,
-                "-kernel",
-                path_str(&m4_bin)?,
-            ],
+            &qemu_args("300", &semihosting, path_str(&m4_bin)?),
         )?;
     }
     Ok(())
+}
+
+/// arm-none-eabi-gcc's options for the C programs on the Cortex-M4F: the
+/// core and its FPU, newlib with semihosting, unused sections dropped.
+const M4_CFLAGS: [&str; 7] = [
+    "-mcpu=cortex-m4",
+    "-mthumb",
+    "-mfloat-abi=hard",
+    "-mfpu=fpv4-sp-d16",
+    "--specs=rdimon.specs",
+    "-Wl,--gc-sections",
+    "-Wl,--no-warn-execstack",
+];
+
+/// The C libraries of `mag-cal-ffi` (an rlib by its manifest):
+/// `cargo rustc --locked -p mag-cal-ffi --crate-type TYPES` with `args`
+/// (profile, target, features).
+fn ffi_libraries(types: &str, args: &[&str]) -> Result<(), String> {
+    let mut cargo = vec![
+        "rustc",
+        "--locked",
+        "-p",
+        "mag-cal-ffi",
+        "--crate-type",
+        types,
+    ];
+    cargo.extend(args);
+    run(&root(), "cargo", &cargo)
+}
+
+/// The arguments of `timeout` that run `elf` on QEMU's mps2-an386 (a
+/// Cortex-M4F) for at most `seconds`, with `semihosting` as its
+/// `-semihosting-config` (the program's arguments, files and exit status).
+fn qemu_args<'a>(seconds: &'a str, semihosting: &'a str, elf: &'a str) -> [&'a str; 15] {
+    [
+        seconds,
+        "qemu-system-arm",
+        "-cpu",
+        "cortex-m4",
+        "-machine",
+        "mps2-an386",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-semihosting-config",
+        semihosting,
+        "-kernel",
+        elf,
+    ]
 }
 
 /// Footprint of the C API on the Cortex-M4F (`mag-cal-ffi/c/cortex-m/
@@ -493,20 +497,9 @@ fn c_footprint() -> Result<(), String> {
         ),
         ("all-methods", every, false),
     ] {
-        let mut cargo = vec![
-            "rustc",
-            "--profile",
-            "c-m4",
-            "--locked",
-            "-p",
-            "mag-cal-ffi",
-            "--target",
-            "thumbv7em-none-eabihf",
-            "--crate-type",
-            "staticlib",
-        ];
+        let mut cargo = vec!["--profile", "c-m4", "--target", "thumbv7em-none-eabihf"];
         cargo.extend(features);
-        run(&root, "cargo", &cargo)?;
+        ffi_libraries("staticlib", &cargo)?;
         let elf = c_dir.join(format!("footprint-{name}.elf"));
         let mut args = vec![
             "-std=c99",
@@ -516,13 +509,9 @@ fn c_footprint() -> Result<(), String> {
             "-Os",
             "-ffunction-sections",
             "-fdata-sections",
-            "-mcpu=cortex-m4",
-            "-mthumb",
-            "-mfloat-abi=hard",
-            "-mfpu=fpv4-sp-d16",
-            "--specs=rdimon.specs",
-            "-Wl,--gc-sections",
-            "-Wl,--no-warn-execstack",
+        ];
+        args.extend(M4_CFLAGS);
+        args.extend([
             "-T",
             path_str(&script)?,
             include.as_str(),
@@ -532,7 +521,7 @@ fn c_footprint() -> Result<(), String> {
             "-lm",
             "-o",
             path_str(&elf)?,
-        ];
+        ]);
         if baseline {
             args.push("-DBASELINE");
         }
@@ -550,23 +539,7 @@ fn c_footprint() -> Result<(), String> {
         let log = output(
             &root,
             "timeout",
-            &[
-                "120",
-                "qemu-system-arm",
-                "-cpu",
-                "cortex-m4",
-                "-machine",
-                "mps2-an386",
-                "-nographic",
-                "-monitor",
-                "none",
-                "-serial",
-                "none",
-                "-semihosting-config",
-                "enable=on,target=native",
-                "-kernel",
-                path_str(&elf)?,
-            ],
+            &qemu_args("120", "enable=on,target=native", path_str(&elf)?),
         )?;
         let log = String::from_utf8_lossy(&log);
         let stack: u64 = log
