@@ -59,6 +59,7 @@ use mag_cal_core::align::{procrustes, AlignedCalibration};
 use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, wrap_deg, HeadingSmoother};
 use mag_cal_core::offsets::{refit_offsets, Strength};
+use mag_cal_core::planar::{calibrate_planar, PlanarConfig};
 use mag_cal_core::{
     calibrate, persist, Calibration, Config, Error, Fit, LsVariant, Method, Real, Sample,
     SampleStore, Thresholds, MIN_SAMPLES,
@@ -789,6 +790,22 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
                 if !b.iter().all(|v| v.is_finite()) || !fit.determinacy.is_finite() {
                     return Err(format!("refit_offsets: non-finite result {fit:?}"));
                 }
+            }
+        }
+        // Planar fits of the same readings: a result or an error, and a
+        // result gives finite headings.
+        let up = rng.any_vec3();
+        let planar = calibrate_planar::<T, _>(&readings, &PlanarConfig::with_up(up));
+        if let Ok(fit) = planar {
+            let c = fit.calibration;
+            let finite = c
+                .axis()
+                .iter()
+                .chain(c.centre().iter())
+                .all(|v| v.is_finite());
+            let h = c.heading_deg(raw);
+            if !finite || !h.is_finite() || h.abs() > T::lit(180.0) {
+                return Err(format!("calibrate_planar: bad result {fit:?}, heading {h}"));
             }
         }
         // A rotation, a nearly-rotation, or garbage.

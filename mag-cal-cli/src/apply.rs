@@ -24,6 +24,9 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErro
     let (cal_source, source) = sources(&args.calibration, &args.file)?;
     let cal_name = cal_source.name();
     let cal_json = read_json(&cal_source.read()?, &cal_name)?;
+    if cal_json.get("method").and_then(Value::as_str) == Some("planar") {
+        return crate::planar::apply(args, &cal_json, &cal_name, &source, out);
+    }
     let cal = calibration_from_value(&cal_json, &cal_name)?;
     let mut notes = Vec::new();
     let flags = if args.flags {
@@ -173,7 +176,7 @@ impl RowFlags {
 }
 
 /// A CSV field: the shortest round-trip form, `nan` for non-finite values.
-fn number(v: f64) -> String {
+pub(crate) fn number(v: f64) -> String {
     if v.is_finite() {
         format!("{v}")
     } else {

@@ -73,6 +73,8 @@ pub enum Command {
     Apply(ApplyArgs),
     /// Re-estimate only the hard iron of a calibration from a file of raw samples
     Offsets(OffsetsArgs),
+    /// Fit a heading-only calibration to turns about one axis (a car, a boat)
+    Planar(PlanarArgs),
 }
 
 /// Options of `magcal fit`.
@@ -192,6 +194,103 @@ pub struct OffsetsArgs {
     /// Magnetometer columns by header name
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
+}
+
+/// Options of `magcal planar`.
+#[derive(Debug, Args)]
+pub struct PlanarArgs {
+    /// Raw samples taken while the device turned about one axis ('-' for stdin)
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+
+    /// The sensor axis that points up while turning: it sets the sense of the
+    /// heading (clockwise seen from above is positive)
+    #[arg(long, value_enum, default_value_t = AxisArg::MinusZ, allow_hyphen_values = true)]
+    pub up: AxisArg,
+
+    /// Heading 0 at... : ROW:DEG gives sample ROW (0-based, in file order) the
+    /// heading DEG; without it, heading 0 is an arbitrary turn angle
+    #[arg(long, value_name = "ROW:DEG", value_parser = parse_align)]
+    pub align: Option<(usize, f64)>,
+
+    /// Floating-point precision of the fit
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+
+    /// Output format
+    #[arg(long, value_enum, default_value_t = Format::Text)]
+    pub format: Format,
+
+    /// Magnetometer columns by header name
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
+    pub columns: Option<Columns>,
+}
+
+/// `--up`: a sensor axis with its sign.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum AxisArg {
+    /// +x
+    #[value(name = "x", alias = "+x")]
+    X,
+    /// -x
+    #[value(name = "-x")]
+    MinusX,
+    /// +y
+    #[value(name = "y", alias = "+y")]
+    Y,
+    /// -y
+    #[value(name = "-y")]
+    MinusY,
+    /// +z
+    #[value(name = "z", alias = "+z")]
+    Z,
+    /// -z (a sensor whose z axis points down, as NED)
+    #[value(name = "-z")]
+    MinusZ,
+}
+
+impl AxisArg {
+    /// The unit vector.
+    pub fn vector(self) -> [f64; 3] {
+        match self {
+            AxisArg::X => [1.0, 0.0, 0.0],
+            AxisArg::MinusX => [-1.0, 0.0, 0.0],
+            AxisArg::Y => [0.0, 1.0, 0.0],
+            AxisArg::MinusY => [0.0, -1.0, 0.0],
+            AxisArg::Z => [0.0, 0.0, 1.0],
+            AxisArg::MinusZ => [0.0, 0.0, -1.0],
+        }
+    }
+
+    /// The name `--up` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AxisArg::X => "x",
+            AxisArg::MinusX => "-x",
+            AxisArg::Y => "y",
+            AxisArg::MinusY => "-y",
+            AxisArg::Z => "z",
+            AxisArg::MinusZ => "-z",
+        }
+    }
+}
+
+/// `--align ROW:DEG`.
+fn parse_align(s: &str) -> Result<(usize, f64), String> {
+    let (row, deg) = s
+        .split_once(':')
+        .ok_or_else(|| format!("expected ROW:DEG, e.g. 0:90, got '{s}'"))?;
+    let row = row
+        .trim()
+        .parse::<usize>()
+        .map_err(|_| format!("ROW must be a row index (0, 1, ...), got '{row}'"))?;
+    let deg = deg
+        .trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|d| d.is_finite())
+        .ok_or_else(|| format!("DEG must be a finite number of degrees, got '{deg}'"))?;
+    Ok((row, deg))
 }
 
 /// `--strength`: what is known of the field strength.

@@ -30,6 +30,7 @@ mod fit;
 mod input;
 mod offsets;
 mod output;
+mod planar;
 mod selection;
 mod svg;
 
@@ -73,6 +74,7 @@ fn run(cli: Cli) -> Result<Vec<String>, CliError> {
         Command::Fit(args) => fit::run(&args, &mut std::io::stdout().lock()),
         Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),
         Command::Offsets(args) => offsets::run(&args, &mut std::io::stdout().lock()),
+        Command::Planar(args) => planar::run(&args, &mut std::io::stdout().lock()),
     }
 }
 

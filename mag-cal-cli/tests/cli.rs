@@ -1940,3 +1940,119 @@ fn offsets_follow_a_moved_hard_iron_and_refuse_a_cluster() {
     assert_eq!(refused.code, 3, "{}", refused.stdout);
     assert!(refused.stderr.contains("determin"), "{}", refused.stderr);
 }
+
+#[test]
+fn planar_calibrates_turns_about_one_axis_and_apply_gives_headings() {
+    // The 3-D fit refuses the nearly planar recording and points to planar.
+    let fit = magcal(&["fit", &real("planar_243.txt")], None);
+    assert_eq!(fit.code, 3);
+    assert!(fit.stderr.contains("'magcal planar'"), "{}", fit.stderr);
+    let run = magcal(
+        &[
+            "planar",
+            &real("planar_243.txt"),
+            "--up",
+            "z",
+            "--align",
+            "0:90",
+            "--format",
+            "json",
+        ],
+        None,
+    );
+    let v = run.json();
+    assert_eq!(v["method"], "planar");
+    assert!(v["out_of_plane_offset"].is_null());
+    assert!(v["fit_error"].as_f64().unwrap() < 0.05, "{v}");
+    assert_eq!(v["sectors"], 12);
+    assert!(v["axis"][2].as_f64().unwrap() > 0.9, "--up z: {v}");
+    let rows = 243;
+    let accounted = v["samples_used"].as_u64().unwrap()
+        + v["samples_dropped"].as_u64().unwrap()
+        + v["screened"].as_u64().unwrap()
+        + v["rejected"].as_u64().unwrap();
+    assert_eq!(accounted, rows);
+    // f32 gives the same calibration.
+    let v32 = magcal(
+        &[
+            "planar",
+            &real("planar_243.txt"),
+            "--up",
+            "z",
+            "--align",
+            "0:90",
+            "--format",
+            "json",
+            "--precision",
+            "f32",
+        ],
+        None,
+    )
+    .json();
+    for i in 0..3 {
+        let (a, b) = (
+            v["centre"][i].as_f64().unwrap(),
+            v32["centre"][i].as_f64().unwrap(),
+        );
+        assert!(
+            (a - b).abs() < 1e-3 * a.abs().max(1.0),
+            "centre {i}: {a} {b}"
+        );
+    }
+    // `apply` reads it: unit u, heading 90 at row 0, and every heading
+    // the angle of u less the zero.
+    let cal = temp_file("planar-cal.json", run.stdout.as_bytes());
+    let out = magcal(&["apply", &cal, &real("planar_243.txt")], None);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let mut lines = out.stdout.lines();
+    assert_eq!(lines.next(), Some("u,v,heading_deg,heading_smoothed_deg"));
+    let zero = v["zero_deg"].as_f64().unwrap();
+    for (row, line) in lines.enumerate() {
+        let f: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        let norm = (f[0] * f[0] + f[1] * f[1]).sqrt();
+        assert!((norm - 1.0).abs() < 0.2, "row {row}: |u| {norm}");
+        let expect = (f[1].atan2(f[0]).to_degrees() - zero + 540.0).rem_euclid(360.0) - 180.0;
+        let diff = (f[2] - expect + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(diff.abs() < 1e-9, "row {row}: {} against {expect}", f[2]);
+        if row == 0 {
+            assert!((f[2] - 90.0).abs() < 1e-9, "{line}");
+        }
+    }
+    // Text names the unobservable offset.
+    let text = magcal(&["planar", &real("planar_243.txt"), "--up", "z"], None);
+    assert_eq!(text.code, 0);
+    assert!(text.stdout.contains("not observable"), "{}", text.stdout);
+}
+
+#[test]
+fn planar_refuses_what_is_not_planar_and_bad_options() {
+    let run = magcal(&["planar", &real("icm20948_mag_300.csv")], None);
+    assert_eq!(run.code, 3);
+    assert!(
+        run.stderr.contains("do not lie in a plane (flatness"),
+        "{}",
+        run.stderr
+    );
+    let run = magcal(
+        &["planar", &real("planar_243.txt"), "--align", "100000:0"],
+        None,
+    );
+    assert_eq!(run.code, 2);
+    assert!(
+        run.stderr.contains("the file has 243 samples"),
+        "{}",
+        run.stderr
+    );
+    let run = magcal(&["planar", &real("planar_243.txt"), "--align", "x"], None);
+    assert_eq!(run.code, 2);
+    let run = magcal(&["planar", &real("planar_243.txt"), "--up", "w"], None);
+    assert_eq!(run.code, 2);
+    let cal = magcal(
+        &["planar", &real("planar_243.txt"), "--format", "json"],
+        None,
+    );
+    let cal = temp_file("planar-cal-flags.json", cal.stdout.as_bytes());
+    let run = magcal(&["apply", &cal, &real("planar_243.txt"), "--flags"], None);
+    assert_eq!(run.code, 2);
+    assert!(run.stderr.contains("--flags"), "{}", run.stderr);
+}

@@ -109,6 +109,30 @@ pub enum Error {
         /// The limit it is below.
         limit: Figure,
     },
+    /// A planar fit ([`crate::planar`]): the samples do not lie near one
+    /// plane; the device turned about more than one axis.
+    NotPlanar {
+        /// Smallest over largest eigenvalue of the samples' covariance.
+        flatness: Figure,
+        /// The limit it exceeds.
+        limit: Figure,
+    },
+    /// A planar fit: the samples in their plane do not lie on an ellipse
+    /// (robust fit error too large, or a conic that is not an ellipse,
+    /// given as infinity).
+    NoEllipse {
+        /// Robust fit error (standard deviation of `|u| - 1`).
+        fit_error: Figure,
+        /// The limit it exceeds.
+        limit: Figure,
+    },
+    /// A planar fit: the turns cover too little of the circle.
+    ShortArc {
+        /// Sectors of 30 deg of turn angle that hold samples.
+        sectors: u8,
+        /// Sectors required.
+        required: u8,
+    },
 }
 
 impl fmt::Display for Error {
@@ -183,6 +207,25 @@ impl fmt::Display for Error {
             Error::OffsetsUndetermined { determinacy, limit } => write!(
                 f,
                 "the readings cover too few directions to determine the offsets (determinacy {determinacy:.3}, limit {limit:.3}): turn the sensor further"
+            ),
+            Error::NotPlanar { flatness, limit } => write!(
+                f,
+                "the samples do not lie in a plane (flatness {flatness:.3}, limit {limit:.3}): \
+                 the device turned about more than one axis; use the three-dimensional calibration"
+            ),
+            Error::NoEllipse { fit_error, limit } if !fit_error.get().is_finite() => write!(
+                f,
+                "the samples in their plane do not lie on an ellipse (the fitted conic is not one, limit {limit:.2}): \
+                 the device did not turn, or these are not one magnetometer's readings"
+            ),
+            Error::NoEllipse { fit_error, limit } => write!(
+                f,
+                "the samples in their plane do not lie on an ellipse (fit error {fit_error:.3} of the field in the plane, limit {limit:.2}): \
+                 the device did not turn, tilted by more than a few degrees while turning, or these are not one magnetometer's readings"
+            ),
+            Error::ShortArc { sectors, required } => write!(
+                f,
+                "the turns cover {sectors} of 12 sectors of 30 deg, at least {required} required: turn through a full circle"
             ),
         }
     }

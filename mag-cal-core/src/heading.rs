@@ -65,7 +65,7 @@ pub fn wrap_deg<T: Real>(deg: T) -> T {
 /// `atan2(y, x)` in degrees in `(-180, 180]`; both arguments finite and
 /// not both zero. The conversion of `+-pi` may round just past 180; that is
 /// clamped, and `-180` (from a `-0` numerator) becomes `180`.
-fn atan2_deg<T: Real>(y: T, x: T) -> T {
+pub(crate) fn atan2_deg<T: Real>(y: T, x: T) -> T {
     let half = T::lit(180.0);
     let d = y.atan2(x) * deg_per_rad::<T>();
     if d > half || d <= -half {

@@ -138,7 +138,10 @@
 //!
 //! [`collector`] gathers samples one at a time on the device, with
 //! coverage and progress; [`offsets`] re-estimates the hard iron alone
-//! when the soft iron is known, from a part of the sphere; [`SampleStore`] is a plain fixed-capacity store;
+//! when the soft iron is known, from a part of the sphere; [`planar`]
+//! gives a heading-only calibration to a device that turns about one axis
+//! (a car, a boat), which the three-dimensional fit refuses as planar;
+//! [`SampleStore`] is a plain fixed-capacity store;
 //! [`persist`] stores a calibration as 92 checksummed bytes.
 //!
 //! # Cost
@@ -210,6 +213,7 @@ mod moments;
 mod normalize;
 pub mod offsets;
 pub mod persist;
+pub mod planar;
 pub mod quality;
 mod quasi_newton;
 mod real;

@@ -277,6 +277,25 @@ fn calibration<T: Real>(scalars: &'static Scalars<T>) {
         }
     }
     keep(cal);
+    // Planar fits of the samples, and every accessor of a planar
+    // calibration built from opaque parts.
+    let config = mag_cal_core::planar::PlanarConfig::with_up(opaque(&[0.0, 0.0, -1.0]));
+    let config = opaque(&config);
+    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(SAMPLES_I16.get(), &config));
+    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(SAMPLES_F32.get(), &config));
+    let parts = opaque(&scalars.rotation);
+    if let Ok(planar) = mag_cal_core::planar::PlanarCalibration::new(
+        parts[0],
+        raw,
+        [parts[1], parts[2]],
+        opaque(&raw[0]),
+    ) {
+        keep(planar.apply(raw));
+        keep(planar.turn_angle_deg(raw));
+        keep(planar.heading_deg(opaque(&(1_i16, -2_i16, 3_i16))));
+        keep(planar.plane_strength());
+        keep(planar.aligned(raw, opaque(&raw[1])));
+    }
 }
 
 /// `align::procrustes` on two opaque slices.

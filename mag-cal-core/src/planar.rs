@@ -1,0 +1,833 @@
+//! Planar (heading-only) calibration, for a device that turns about one
+//! axis only: a car, a boat, a heavy drone.
+//!
+//! Turning about a fixed axis `a`, the sensor sees the field
+//! `h = cos(theta) a + sin(theta) (cos(phi) e1 + sin(phi) e2)` and reads
+//! `y = T h + b + noise`: an ellipse in a plane, centred at
+//! `b + cos(theta) T a`. Only that ellipse is observable; the offset out of
+//! the plane and the rest of `T` are not, and this fit does not invent
+//! them. What it gives is the turn angle `phi` up to a constant, which one
+//! known heading fixes ([`PlanarCalibration::aligned`]).
+//!
+//! The steps, as in the three-dimensional fit:
+//! 1. the glitch rules and the screening ball (median centre, median
+//!    distance) of the three-dimensional fit;
+//! 2. the plane: the normal is the eigenvector of the smallest eigenvalue of
+//!    the screened samples' covariance, its sign set to point along the
+//!    `up` axis the caller names; `flatness` is that eigenvalue over the
+//!    largest (0 for a plane, 1/3-1 for a sphere);
+//! 3. a conic in the plane's coordinates `p` (centred on the samples' mean
+//!    and divided by their median distance): the least squares
+//!    `a x^2 + b y^2 + 2c xy + 2d x + 2e y = 1`, the two-dimensional LS9,
+//!    refitted without rows whose algebraic residual exceeds
+//!    [`crate::OUTLIER_CUT`] robust standard deviations of the previous
+//!    pass when any exceeds [`crate::CLEAN_LIMIT`];
+//! 4. artificial data: the unit vectors `g = W2 (p - c2) / |W2 (p - c2)|`
+//!    of that ellipse and the regression `p ~ T2 g + beta` in closed form
+//!    (ADC2 in two dimensions), then `W2 = (T2 T2^T)^(-1/2)`, `c2 = beta`;
+//!    repeated once with the radial residual cut when the first pass has
+//!    outliers;
+//! 5. a last pass for the figures: the robust fit error of `|u| - 1`, the
+//!    sectors of 30 deg of turn angle that hold samples, the thickness out
+//!    of the plane. [`judge`] turns them into the calibration or a refusal.
+//!
+//! ```
+//! use mag_cal_core::planar::{calibrate_planar, PlanarConfig};
+//!
+//! // A level vehicle turning through two circles; the sensor's z axis
+//! // points down (the convention of `heading`), the hard iron is
+//! // (40, -25, 10) and the soft iron stretches x by 10 %.
+//! let samples: Vec<[f32; 3]> = (0..200)
+//!     .map(|i| {
+//!         let psi = i as f32 * 0.063;
+//!         let field = [0.2 * psi.cos(), -0.2 * psi.sin(), 0.45]; // NED body frame
+//!         [40.0 + 1100.0 * field[0], -25.0 + 1000.0 * field[1], 10.0 + 1000.0 * field[2]]
+//!     })
+//!     .collect();
+//! let fit = calibrate_planar::<f32, _>(&samples, &PlanarConfig::default())?;
+//! // Heading 0 at the first sample; the others follow the turn.
+//! let cal = fit.calibration.aligned(samples[0], 0.0)?;
+//! let h = cal.heading_deg(samples[10]); // psi = 0.63 rad
+//! assert!((h - 0.63f32.to_degrees()).abs() < 0.05);
+//! // The hard iron in the plane (x, y here) is found; z is not observable.
+//! let centre = cal.centre();
+//! assert!((centre[0] - 40.0).abs() < 0.1 && (centre[1] + 25.0).abs() < 0.1);
+//! # Ok::<(), mag_cal_core::Error>(())
+//! ```
+
+use crate::heading::{atan2_deg, wrap_deg};
+use crate::histogram::LogHistogram;
+use crate::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
+use crate::methods::{robust_sigma, OUTLIER_CUT};
+use crate::normalize::{scan, MIN_SAMPLES};
+use crate::rules::{pieces, Drops, Gate};
+use crate::sample::Sample;
+use crate::screen::screen;
+use crate::{Error, Figure, Real, CLEAN_LIMIT};
+
+/// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
+/// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
+/// real recording `planar_243.txt` 0.010; a +-30 deg band gives 0.18 and
+/// the full sphere 0.3-1. Between [`crate::quality::REFUSE_FLATNESS`] and
+/// this, both the planar and the three-dimensional fit may run.
+pub const REFUSE_NOT_PLANAR: f64 = 0.06;
+
+/// Sectors of 30 deg of turn angle that must hold samples: fewer is
+/// [`Error::ShortArc`]. An ellipse from less than about 240 deg of arc is
+/// poorly determined (its centre slides along the missing side).
+pub const MIN_SECTORS: u8 = 8;
+
+/// The sectors of turn angle counted by [`MIN_SECTORS`].
+pub const SECTORS: u8 = 12;
+
+/// Artificial-data passes with the residual cut on data with outliers
+/// (step 4).
+const ROBUST_ROUNDS: u32 = 2;
+
+/// The limits [`judge`] applies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub struct PlanarThresholds {
+    /// Flatness above this: [`Error::NotPlanar`].
+    pub refuse_not_planar: f32,
+    /// Fit error above this: [`Error::NoEllipse`].
+    pub refuse_fit_error: f32,
+    /// Fewer sectors than this: [`Error::ShortArc`].
+    pub min_sectors: u8,
+    /// Share of the rules' rows screened out or rejected above this:
+    /// [`Error::TooManyOutliers`].
+    pub refuse_outlier_share: f32,
+}
+
+impl PlanarThresholds {
+    /// The measured constants of this module and of [`crate::quality`].
+    pub const DEFAULT: Self = Self {
+        refuse_not_planar: REFUSE_NOT_PLANAR as f32,
+        refuse_fit_error: crate::quality::REFUSE_FIT_ERROR as f32,
+        min_sectors: MIN_SECTORS,
+        refuse_outlier_share: crate::quality::REFUSE_OUTLIER_SHARE as f32,
+    };
+}
+
+impl Default for PlanarThresholds {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// What to run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct PlanarConfig {
+    /// The sensor axis that points (roughly) up while the device turns,
+    /// e.g. `[0, 0, -1]` for a sensor whose z axis points down (the
+    /// default, the convention of [`crate::heading`]). It sets the sign of
+    /// the turn axis, and with it the sense of the heading: clockwise seen
+    /// from above is positive.
+    pub up: [f64; 3],
+    /// The judging limits.
+    pub thresholds: PlanarThresholds,
+}
+
+impl PlanarConfig {
+    /// `up = [0, 0, -1]`, the measured thresholds.
+    pub const DEFAULT: Self = Self {
+        up: [0.0, 0.0, -1.0],
+        thresholds: PlanarThresholds::DEFAULT,
+    };
+
+    /// The defaults with another `up` axis.
+    pub const fn with_up(up: [f64; 3]) -> Self {
+        Self {
+            up,
+            thresholds: PlanarThresholds::DEFAULT,
+        }
+    }
+}
+
+impl Default for PlanarConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A heading calibration valid for turns about one axis:
+/// `u = K (y - centre)` is a unit 2-vector whose angle is the turn angle,
+/// and the heading is that angle less a constant.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarCalibration<T: Real> {
+    axis: [T; 3],
+    centre: [T; 3],
+    matrix: [[T; 3]; 2],
+    zero_deg: T,
+}
+
+impl<T: Real> PlanarCalibration<T> {
+    /// A calibration from its parts (e.g. read back from storage): the turn
+    /// axis (unit length), the centre of the ellipse in sensor units, the
+    /// 2x3 matrix `K` by rows and the angle of heading 0, in degrees.
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for a non-finite part or an axis that is not
+    /// of unit length (to 1e-3).
+    pub fn new(
+        axis: [T; 3],
+        centre: [T; 3],
+        matrix: [[T; 3]; 2],
+        zero_deg: T,
+    ) -> Result<Self, Error> {
+        let finite = axis
+            .iter()
+            .chain(centre.iter())
+            .chain(matrix.iter().flatten())
+            .all(|v| v.is_finite())
+            && zero_deg.is_finite();
+        let unit = (dot(&axis, &axis) - T::one()).abs() <= T::lit(1e-3);
+        if finite && unit {
+            Ok(Self {
+                axis,
+                centre,
+                matrix,
+                zero_deg: wrap_deg(zero_deg),
+            })
+        } else {
+            Err(Error::OutOfRange)
+        }
+    }
+
+    /// The turn axis, unit length, in sensor coordinates, on the side of
+    /// the caller's `up` axis.
+    pub fn axis(&self) -> [T; 3] {
+        self.axis
+    }
+
+    /// The centre of the ellipse, sensor units: the hard iron within the
+    /// plane of the turns. Along the axis it is the samples' level, which
+    /// includes the vertical field: not the hard iron.
+    pub fn centre(&self) -> [T; 3] {
+        self.centre
+    }
+
+    /// `K` (2x3, by rows): `u = K (y - centre)`.
+    pub fn matrix(&self) -> [[T; 3]; 2] {
+        self.matrix
+    }
+
+    /// The turn angle of heading 0, degrees.
+    pub fn zero_deg(&self) -> T {
+        self.zero_deg
+    }
+
+    /// The field strength in the plane (the horizontal field for a level
+    /// vehicle), sensor units: `1 / sqrt(det(K K^T))`.
+    pub fn plane_strength(&self) -> T {
+        let [k0, k1] = self.matrix;
+        let (a, b, c) = (dot(&k0, &k0), dot(&k1, &k1), dot(&k0, &k1));
+        let det = a * b - c * c;
+        if det > T::zero() {
+            T::one() / det.sqrt().sqrt()
+        } else {
+            T::zero()
+        }
+    }
+
+    /// `u = K (y - centre)`: unit length for a sample on the ellipse.
+    pub fn apply<S: Sample>(&self, sample: S) -> [T; 2] {
+        let y = sample.xyz::<T>();
+        let d = [
+            y[0] - self.centre[0],
+            y[1] - self.centre[1],
+            y[2] - self.centre[2],
+        ];
+        [dot(&self.matrix[0], &d), dot(&self.matrix[1], &d)]
+    }
+
+    /// The turn angle of a sample, degrees in `(-180, 180]`, increasing
+    /// counter-clockwise about [`PlanarCalibration::axis`] (the field turns
+    /// against the device: clockwise turns of the device seen from above
+    /// increase it).
+    pub fn turn_angle_deg<S: Sample>(&self, sample: S) -> T {
+        let [x, y] = self.apply(sample);
+        if x == T::zero() && y == T::zero() || !(x.is_finite() && y.is_finite()) {
+            return T::zero();
+        }
+        atan2_deg(y, x)
+    }
+
+    /// The heading of a sample, degrees in `(-180, 180]`: the turn angle
+    /// less that of heading 0.
+    pub fn heading_deg<S: Sample>(&self, sample: S) -> T {
+        wrap_deg(self.turn_angle_deg(sample) - self.zero_deg)
+    }
+
+    /// The same calibration with heading 0 set so that `sample` has the
+    /// heading `heading_deg` (one reading at a known heading aligns it).
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for a non-finite heading.
+    pub fn aligned<S: Sample>(&self, sample: S, heading_deg: T) -> Result<Self, Error> {
+        let zero = self.turn_angle_deg(sample) - heading_deg;
+        Self::new(self.axis, self.centre, self.matrix, zero)
+    }
+}
+
+/// The figures of a planar fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct PlanarReport<T: Real> {
+    /// Rows the final passes used.
+    pub samples_used: usize,
+    /// Rows dropped by each rule.
+    pub drops: Drops,
+    /// Rows kept by the rules but outside the screening ball.
+    pub screened: usize,
+    /// Rows inside the ball left out by their residual.
+    pub rejected: usize,
+    /// Smallest over largest eigenvalue of the screened samples'
+    /// covariance (0 for a plane).
+    pub flatness: T,
+    /// Robust standard deviation `1.4826 median||u| - 1|` of the rows,
+    /// units of the field in the plane.
+    pub fit_error: T,
+    /// Sectors of 30 deg of turn angle (of [`SECTORS`]) with at least two
+    /// rows used.
+    pub sectors: u8,
+    /// RMS distance of the rows used from the plane, units of the field in
+    /// the plane (tilt of the turns).
+    pub thickness: T,
+    /// Angle between the turn axis and the caller's `up` axis, degrees.
+    pub axis_tilt_deg: T,
+    /// Passes over the samples.
+    pub passes: u32,
+}
+
+/// A planar calibration and its figures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct PlanarFit<T: Real> {
+    /// The calibration, with heading 0 at turn angle 0.
+    pub calibration: PlanarCalibration<T>,
+    /// How it was obtained.
+    pub report: PlanarReport<T>,
+}
+
+/// Fits a heading calibration to samples taken while the device turned
+/// about one axis (see the module docs).
+///
+/// # Errors
+/// The rules' and screening's refusals of the three-dimensional fit
+/// ([`Error::TooFewSamples`], [`Error::AllSamplesEqual`], ...), and from
+/// [`judge`]: [`Error::NotPlanar`], [`Error::NoEllipse`],
+/// [`Error::ShortArc`], [`Error::TooManyOutliers`].
+pub fn calibrate_planar<T: Real, S: Sample>(
+    samples: &[S],
+    config: &PlanarConfig,
+) -> Result<PlanarFit<T>, Error> {
+    let scanned = scan::<T, S>(samples, true)?;
+    let screening = screen(samples, &scanned)?;
+    let gate = Gate {
+        rules: screening.rules,
+        screen: Some(screening.ball),
+    };
+    let mut passes = scanned_passes() + screening.passes;
+    let norm = screening.norm;
+    let (c, m, inv_m) = (
+        [norm.centre.x, norm.centre.y, norm.centre.z],
+        norm.scale,
+        norm.inv_scale,
+    );
+    let gated = Rows {
+        samples,
+        gate: &gate,
+        centre: c,
+        inv_scale: inv_m,
+    };
+
+    // Step 2: the plane.
+    let (mut n, mut s1, mut s2) = (0usize, [T::zero(); 3], [[T::zero(); 3]; 3]);
+    gated.each(|d| {
+        n += 1;
+        for i in 0..3 {
+            s1[i] += d[i];
+            for j in 0..3 {
+                s2[i][j] += d[i] * d[j];
+            }
+        }
+    });
+    passes += 1;
+    if n < MIN_SAMPLES {
+        return Err(Error::TooFewSamples {
+            found: n,
+            required: MIN_SAMPLES,
+        });
+    }
+    let inv_n = T::one() / T::from_count(n);
+    let mean = s1.map(|s| s * inv_n);
+    let mut cov: Mat<T, 3> = [[T::zero(); 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            cov[i][j] = s2[i][j] * inv_n - mean[i] * mean[j];
+        }
+    }
+    let eig = sym_eigen(&cov)?;
+    let (lo, hi) = (eig.argmin(), eig.argmax());
+    let largest = eig.values.get(hi).copied().unwrap_or(T::zero());
+    if !(largest > T::zero()) {
+        return Err(Error::AllSamplesEqual);
+    }
+    let flatness = larger(eig.values.get(lo).copied().unwrap_or(T::zero()), T::zero()) / largest;
+    let up = config.up.map(T::lit);
+    let mut axis = eig.min_vector();
+    if dot(&axis, &up) < T::zero() {
+        axis = axis.map(|v| -v);
+    }
+    // e1 along the largest spread, e2 = axis x e1: e1 x e2 = axis.
+    let e1 = eig.max_vector();
+    let e2 = cross(&axis, &e1);
+    let up_norm = dot(&up, &up).sqrt();
+    let axis_tilt_deg = if up_norm > T::zero() {
+        let cos = dot(&axis, &up) / up_norm;
+        let sin = cross(&axis, &up).map(|v| v / up_norm);
+        atan2_deg(dot(&sin, &sin).sqrt(), cos)
+    } else {
+        T::zero()
+    };
+    let plane = Plane { mean, e1, e2, axis };
+
+    // Step 3: the conic of every row.
+    let (mut w2, mut c2) = conic_fit(&gated, &plane, None, config)?;
+    passes += 1;
+
+    // Step 4: artificial data. When the first pass's radial residuals show
+    // outliers, the conic is refitted without them, and the artificial-data
+    // pass repeated twice with the cut of the pass before.
+    let mut cut: Option<T> = None;
+    for round in 0..=ROBUST_ROUNDS {
+        let adc = adc_pass(&gated, &plane, (w2, c2), cut)?;
+        passes += 1;
+        let outliers = adc
+            .sigma
+            .is_some_and(|s| adc.worst > s * T::lit(CLEAN_LIMIT));
+        if round == 0 && !outliers {
+            (w2, c2) = adc.estimate;
+            break;
+        }
+        let limit = adc.sigma.map(|s| s * T::lit(OUTLIER_CUT));
+        if round == 0 {
+            // The robust start: the conic of the rows within the cut of the
+            // plain conic; its artificial data use the same cut.
+            (w2, c2) = conic_fit(&gated, &plane, limit.map(|l| (l, (w2, c2))), config)?;
+            passes += 1;
+        } else {
+            (w2, c2) = adc.estimate;
+        }
+        cut = limit;
+    }
+
+    // Step 5: the figures under the result.
+    let mut hist = LogHistogram::new();
+    let mut sector_rows = [0u32; SECTORS as usize];
+    let (mut used, mut seen, mut out_of_plane) = (0usize, 0usize, T::zero());
+    gated.each(|d| {
+        let (p, h) = plane.coordinates(d);
+        seen += 1;
+        let (e, u, r) = radial(&(w2, c2), p);
+        hist.add(e);
+        if cut.is_some_and(|limit| !(e <= limit)) || !(r > T::zero()) {
+            return;
+        }
+        used += 1;
+        out_of_plane += h * h;
+        let angle = atan2_deg(u[1], u[0]) + T::lit(180.0);
+        let k = (angle * T::lit(f64::from(SECTORS) / 360.0)).to_count();
+        if let Some(cell) = sector_rows.get_mut(k.min(SECTORS as usize - 1)) {
+            *cell = cell.saturating_add(1);
+        }
+    });
+    passes += 1;
+    let fit_error = robust_sigma::<T>(&hist).unwrap_or(T::zero());
+    let sectors = sector_rows.iter().filter(|&&k| k >= 2).count() as u8;
+    // The in-plane field strength in `p` units: 1 / sqrt(det W2).
+    let det = w2[0][0] * w2[1][1] - w2[0][1] * w2[1][0];
+    let radius = if det > T::zero() {
+        T::one() / det.sqrt()
+    } else {
+        T::zero()
+    };
+    let thickness = if used > 0 && radius > T::zero() {
+        (out_of_plane / T::from_count(used)).sqrt() / radius
+    } else {
+        T::zero()
+    };
+    let valid = screening.valid;
+    let report = PlanarReport {
+        samples_used: used,
+        drops: screening.drops,
+        screened: valid.saturating_sub(seen),
+        rejected: seen - used,
+        flatness,
+        fit_error,
+        sectors,
+        thickness,
+        axis_tilt_deg,
+        passes,
+    };
+    judge(&report, valid, &config.thresholds)?;
+
+    // Back to sensor units: u = W2 P (y - centre) / m.
+    let mut centre = c;
+    let mut matrix = [[T::zero(); 3]; 2];
+    for i in 0..3 {
+        centre[i] += m * (mean[i] + c2[0] * e1[i] + c2[1] * e2[i]);
+        for (row, w) in matrix.iter_mut().zip(&w2) {
+            row[i] = (w[0] * e1[i] + w[1] * e2[i]) * inv_m;
+        }
+    }
+    let calibration = PlanarCalibration::new(axis, centre, matrix, T::zero())?;
+    Ok(PlanarFit {
+        calibration,
+        report,
+    })
+}
+
+/// Turns the figures into acceptance or a refusal: `valid` is the rows the
+/// rules kept.
+///
+/// # Errors
+/// [`Error::TooFewSamples`], [`Error::NotPlanar`], [`Error::NoEllipse`],
+/// [`Error::TooManyOutliers`], [`Error::ShortArc`], in that order.
+pub fn judge<T: Real>(
+    report: &PlanarReport<T>,
+    valid: usize,
+    th: &PlanarThresholds,
+) -> Result<(), Error> {
+    if report.samples_used < MIN_SAMPLES {
+        return Err(Error::TooFewSamples {
+            found: report.samples_used,
+            required: MIN_SAMPLES,
+        });
+    }
+    if !(report.flatness.to_single() <= th.refuse_not_planar) {
+        return Err(Error::NotPlanar {
+            flatness: Figure::new(report.flatness.to_single()),
+            limit: Figure::new(th.refuse_not_planar),
+        });
+    }
+    if !(report.fit_error.to_single() <= th.refuse_fit_error) {
+        return Err(Error::NoEllipse {
+            fit_error: Figure::new(report.fit_error.to_single()),
+            limit: Figure::new(th.refuse_fit_error),
+        });
+    }
+    let out = report.screened + report.rejected;
+    if valid > 0 && out as f32 > th.refuse_outlier_share * valid as f32 {
+        return Err(Error::TooManyOutliers {
+            rejected: out,
+            valid,
+            limit: Figure::new(th.refuse_outlier_share),
+        });
+    }
+    if report.sectors < th.min_sectors {
+        return Err(Error::ShortArc {
+            sectors: report.sectors,
+            required: th.min_sectors,
+        });
+    }
+    Ok(())
+}
+
+/// Passes of the rules' scan (the drop count and the moments).
+const fn scanned_passes() -> u32 {
+    2
+}
+
+/// The rows a pass visits, in normalised coordinates `(y - c) / m`.
+struct Rows<'a, T: Real, S: Sample> {
+    samples: &'a [S],
+    gate: &'a Gate<T>,
+    centre: [T; 3],
+    inv_scale: T,
+}
+
+impl<T: Real, S: Sample> Rows<'_, T, S> {
+    /// Calls `f` on every row the gate passes.
+    #[inline(always)]
+    fn each(&self, mut f: impl FnMut([T; 3])) {
+        let (c, k) = (self.centre, self.inv_scale);
+        for (prev, block) in pieces(self.samples, crate::moments::BLOCK) {
+            for y in self.gate.rows(block, prev) {
+                f([(y[0] - c[0]) * k, (y[1] - c[1]) * k, (y[2] - c[2]) * k]);
+            }
+        }
+    }
+}
+
+/// The plane of the turns, in normalised coordinates.
+struct Plane<T: Real> {
+    mean: [T; 3],
+    e1: [T; 3],
+    e2: [T; 3],
+    axis: [T; 3],
+}
+
+impl<T: Real> Plane<T> {
+    /// The coordinates in the plane and the distance along the axis.
+    #[inline(always)]
+    fn coordinates(&self, d: [T; 3]) -> ([T; 2], T) {
+        let m = self.mean;
+        let q = [d[0] - m[0], d[1] - m[1], d[2] - m[2]];
+        ([dot(&q, &self.e1), dot(&q, &self.e2)], dot(&q, &self.axis))
+    }
+}
+
+/// An ellipse in the plane: `W2` (symmetric) and the centre `c2`.
+type Ellipse<T> = ([[T; 2]; 2], [T; 2]);
+
+/// The radial residual `| |W2 (p - c2)| - 1 |` and `u = W2 (p - c2)`.
+#[inline(always)]
+fn radial<T: Real>(e: &Ellipse<T>, p: [T; 2]) -> (T, [T; 2], T) {
+    let (w2, c2) = e;
+    let u = mul2(w2, [p[0] - c2[0], p[1] - c2[1]]);
+    let r = (u[0] * u[0] + u[1] * u[1]).sqrt();
+    ((r - T::one()).abs(), u, r)
+}
+
+/// The conic least squares over the rows, or over those whose radial
+/// residual under an ellipse is within a limit; its ellipse.
+fn conic_fit<T: Real, S: Sample>(
+    rows: &Rows<'_, T, S>,
+    plane: &Plane<T>,
+    within: Option<(T, Ellipse<T>)>,
+    config: &PlanarConfig,
+) -> Result<Ellipse<T>, Error> {
+    let (mut a5, mut r5) = ([[T::zero(); 5]; 5], [T::zero(); 5]);
+    let mut kept = 0usize;
+    rows.each(|d| {
+        let (p, _) = plane.coordinates(d);
+        if let Some((limit, e)) = &within {
+            if !(radial(e, p).0 <= *limit) {
+                return;
+            }
+        }
+        kept += 1;
+        let v = conic_row(p);
+        for i in 0..5 {
+            r5[i] += v[i];
+            for j in 0..5 {
+                a5[i][j] += v[i] * v[j];
+            }
+        }
+    });
+    if kept < MIN_SAMPLES {
+        return Err(Error::TooFewSamples {
+            found: kept,
+            required: MIN_SAMPLES,
+        });
+    }
+    let phi = cholesky(&a5)
+        .map(|l| cholesky_solve(&l, &r5))
+        .ok_or(Error::SingularSystem)?;
+    ellipse(&phi).ok_or(Error::NoEllipse {
+        fit_error: Figure::new(f32::INFINITY),
+        limit: Figure::new(config.thresholds.refuse_fit_error),
+    })
+}
+
+/// What an artificial-data pass found.
+struct AdcOut<T: Real> {
+    estimate: Ellipse<T>,
+    /// Robust standard deviation of the radial residuals under the
+    /// pass's starting ellipse (every row, the cut ones included).
+    sigma: Option<T>,
+    /// Their largest magnitude.
+    worst: T,
+}
+
+/// One artificial-data pass from `start`, without rows beyond `cut`.
+fn adc_pass<T: Real, S: Sample>(
+    rows: &Rows<'_, T, S>,
+    plane: &Plane<T>,
+    start: Ellipse<T>,
+    cut: Option<T>,
+) -> Result<AdcOut<T>, Error> {
+    let mut sums = AdcSums::new();
+    let mut hist = LogHistogram::new();
+    let mut worst = T::zero();
+    rows.each(|d| {
+        let (p, _) = plane.coordinates(d);
+        let (e, u, r) = radial(&start, p);
+        if !(r > T::zero()) {
+            return;
+        }
+        hist.add(e);
+        worst = larger(worst, e);
+        if cut.is_some_and(|limit| !(e <= limit)) {
+            return;
+        }
+        sums.add(p, [u[0] / r, u[1] / r]);
+    });
+    Ok(AdcOut {
+        estimate: sums.solve()?,
+        sigma: robust_sigma::<T>(&hist),
+        worst,
+    })
+}
+
+/// The row of the conic least squares for a point of the plane.
+#[inline(always)]
+fn conic_row<T: Real>(p: [T; 2]) -> [T; 5] {
+    let two = T::lit(2.0);
+    [
+        p[0] * p[0],
+        p[1] * p[1],
+        two * p[0] * p[1],
+        two * p[0],
+        two * p[1],
+    ]
+}
+
+/// `W2` (symmetric, `W2^2 = Q / k`) and the centre of the conic `phi`, or
+/// `None` when it is not an ellipse.
+fn ellipse<T: Real>(phi: &[T; 5]) -> Option<Ellipse<T>> {
+    let [a, b, c, d, e] = *phi;
+    let det = a * b - c * c;
+    if !(a > T::zero() && det > T::zero()) {
+        return None;
+    }
+    // Q c2 = -[d, e].
+    let c2 = [(-d * b + e * c) / det, (-e * a + d * c) / det];
+    let k = T::one() + a * c2[0] * c2[0] + b * c2[1] * c2[1] + T::lit(2.0) * c * c2[0] * c2[1];
+    if !(k > T::zero()) {
+        return None;
+    }
+    let w2 = sqrt2(&[[a / k, c / k], [c / k, b / k]])?;
+    Some((w2, c2))
+}
+
+/// The symmetric square root of a symmetric positive definite 2x2 matrix:
+/// `(M + sqrt(det M) I) / sqrt(tr M + 2 sqrt(det M))`.
+fn sqrt2<T: Real>(m: &[[T; 2]; 2]) -> Option<[[T; 2]; 2]> {
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    if !(det > T::zero()) {
+        return None;
+    }
+    let s = det.sqrt();
+    let t = (m[0][0] + m[1][1] + T::lit(2.0) * s).sqrt();
+    if !(t > T::zero()) || !t.is_finite() {
+        return None;
+    }
+    Some([
+        [(m[0][0] + s) / t, m[0][1] / t],
+        [m[1][0] / t, (m[1][1] + s) / t],
+    ])
+}
+
+fn mul2<T: Real>(m: &[[T; 2]; 2], v: [T; 2]) -> [T; 2] {
+    [
+        m[0][0] * v[0] + m[0][1] * v[1],
+        m[1][0] * v[0] + m[1][1] * v[1],
+    ]
+}
+
+fn cross<T: Real>(a: &[T; 3], b: &[T; 3]) -> [T; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// The sums of the regression `p ~ T2 g + beta`.
+struct AdcSums<T: Real> {
+    /// `sum [g, 1] [g, 1]^T`.
+    gg: Mat<T, 3>,
+    /// `sum p [g, 1]^T`, by rows of `p`.
+    pg: [[T; 3]; 2],
+}
+
+impl<T: Real> AdcSums<T> {
+    fn new() -> Self {
+        Self {
+            gg: [[T::zero(); 3]; 3],
+            pg: [[T::zero(); 3]; 2],
+        }
+    }
+
+    #[inline(always)]
+    fn add(&mut self, p: [T; 2], g: [T; 2]) {
+        let x = [g[0], g[1], T::one()];
+        for i in 0..3 {
+            for j in 0..3 {
+                self.gg[i][j] += x[i] * x[j];
+            }
+            self.pg[0][i] += p[0] * x[i];
+            self.pg[1][i] += p[1] * x[i];
+        }
+    }
+
+    /// `W2 = (T2 T2^T)^(-1/2)` and `c2 = beta`.
+    fn solve(&self) -> Result<Ellipse<T>, Error> {
+        if !(self.gg[2][2] >= T::from_count(MIN_SAMPLES)) {
+            return Err(Error::TooFewSamples {
+                found: self.gg[2][2].to_count(),
+                required: MIN_SAMPLES,
+            });
+        }
+        let l = cholesky(&self.gg).ok_or(Error::SingularSystem)?;
+        // Each row of [T2 | beta] solves (sum x x^T) t = sum p_r x.
+        let r0 = cholesky_solve(&l, &self.pg[0]);
+        let r1 = cholesky_solve(&l, &self.pg[1]);
+        let t = [[r0[0], r0[1]], [r1[0], r1[1]]];
+        let tt = [
+            [
+                t[0][0] * t[0][0] + t[0][1] * t[0][1],
+                t[0][0] * t[1][0] + t[0][1] * t[1][1],
+            ],
+            [
+                t[1][0] * t[0][0] + t[1][1] * t[0][1],
+                t[1][0] * t[1][0] + t[1][1] * t[1][1],
+            ],
+        ];
+        // (T2 T2^T)^(-1/2) = inverse of its square root.
+        let s = sqrt2(&tt).ok_or(Error::SingularSystem)?;
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        if !(det > T::zero()) || !det.is_finite() {
+            return Err(Error::SingularSystem);
+        }
+        let w = [
+            [s[1][1] / det, -s[0][1] / det],
+            [-s[1][0] / det, s[0][0] / det],
+        ];
+        Ok((w, [r0[2], r1[2]]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sqrt2_squares_back() {
+        let m = [[2.0f64, 0.3], [0.3, 0.5]];
+        let s = sqrt2(&m).unwrap();
+        for i in 0..2 {
+            for j in 0..2 {
+                let sq = s[i][0] * s[0][j] + s[i][1] * s[1][j];
+                assert!((sq - m[i][j]).abs() < 1e-12, "{i}{j}: {sq}");
+            }
+        }
+    }
+
+    #[test]
+    fn ellipse_of_a_known_conic() {
+        // (x - 0.1)^2 / 4 + (y + 0.2)^2 = 1, written as phi . v = 1.
+        let (cx, cy, a, b) = (0.1f64, -0.2, 0.25, 1.0);
+        let k = 1.0 - a * cx * cx - b * cy * cy;
+        let phi = [a / k, b / k, 0.0, -a * cx / k, -b * cy / k];
+        let (w2, c2) = ellipse(&phi).unwrap();
+        assert!((c2[0] - cx).abs() < 1e-12 && (c2[1] - cy).abs() < 1e-12);
+        assert!((w2[0][0] - 0.5).abs() < 1e-12 && (w2[1][1] - 1.0).abs() < 1e-12);
+        assert!(w2[0][1].abs() < 1e-12);
+    }
+}
