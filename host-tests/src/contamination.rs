@@ -1445,48 +1445,9 @@ pub fn totals(study: &Study) -> (usize, usize, usize) {
 
 // ---------------------------------------------------------------- results.md
 
-/// Opening marker of the contamination section of `docs/results.md`.
-pub const SECTION_START: &str = "<!-- contamination:start -->";
-/// Closing marker of the contamination section.
-pub const SECTION_END: &str = "<!-- contamination:end -->";
-
-/// The marked section of `doc` with its markers, if it has one.
-pub fn extract_section(doc: &str) -> Option<&str> {
-    let a = doc.find(SECTION_START)?;
-    let b = doc[a..].find(SECTION_END)? + a + SECTION_END.len();
-    Some(&doc[a..b])
-}
-
-/// `doc` with its marked section replaced by `body` between the markers,
-/// or, without markers, with the section appended.
-pub fn splice_section(doc: &str, body: &str) -> String {
-    let section = format!("{SECTION_START}\n{}\n{SECTION_END}", body.trim_end());
-    match extract_section(doc) {
-        Some(old) => doc.replacen(old, &section, 1),
-        None => {
-            let mut out = doc.trim_end().to_string();
-            if !out.is_empty() {
-                out.push_str("\n\n");
-            }
-            out.push_str(&section);
-            out.push('\n');
-            out
-        }
-    }
-}
-
-/// `new` with the marked section of `old` (if it has one) spliced in: how
-/// a program that rewrites a whole document (the `paper-tables` binary,
-/// `docs/results.md`) keeps the section this module's binary wrote.
-pub fn keep_section(new: &str, old: &str) -> String {
-    match extract_section(old) {
-        Some(section) => {
-            let body = &section[SECTION_START.len()..section.len() - SECTION_END.len()];
-            splice_section(new, body.trim_start_matches('\n'))
-        }
-        None => new.to_string(),
-    }
-}
+/// The name of the contamination section of `docs/results.md`
+/// ([`crate::sections`]).
+pub const SECTION: &str = "contamination";
 
 #[cfg(test)]
 mod tests {
@@ -1508,30 +1469,6 @@ mod tests {
             let d = w[0].0.abs_diff(w[1].0) + w[0].1.abs_diff(w[1].1);
             assert_eq!(d, 1, "{:?}", w);
         }
-    }
-
-    #[test]
-    fn splice_replaces_or_appends() {
-        let doc = "# A\n\ntext\n";
-        let once = splice_section(doc, "one");
-        assert_eq!(
-            once,
-            format!("# A\n\ntext\n\n{SECTION_START}\none\n{SECTION_END}\n")
-        );
-        let twice = splice_section(&once, "two\n");
-        assert_eq!(
-            twice,
-            format!("# A\n\ntext\n\n{SECTION_START}\ntwo\n{SECTION_END}\n")
-        );
-        assert_eq!(
-            extract_section(&twice),
-            Some(format!("{SECTION_START}\ntwo\n{SECTION_END}").as_str())
-        );
-        assert_eq!(
-            keep_section("# B\n", &twice),
-            splice_section("# B\n", "two")
-        );
-        assert_eq!(keep_section("# B\n", doc), "# B\n");
     }
 
     #[test]

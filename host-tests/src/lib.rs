@@ -2,9 +2,11 @@
 
 pub mod contamination;
 pub mod metrics;
+pub mod planar;
 pub mod real;
 pub mod reference;
 pub mod scenarios;
+pub mod sections;
 pub mod sim;
 pub mod study;
 pub mod target_vectors;

@@ -1,188 +1,37 @@
 //! Planar (heading-only) calibration (`mag_cal_core::planar`): a level
 //! vehicle turning about its vertical axis with tilts of 0-10 deg, the
 //! heading against the truth, and against the three-dimensional fit of
-//! the same sensor on full-sphere data. Run with `--nocapture` for the
-//! table of `docs/results.md`.
+//! the same sensor on full-sphere data (`host_tests::planar`; the
+//! `planar-table` binary writes its table into `docs/results.md`).
 
+use host_tests::planar::{
+    attitude, earth, errors, level_turns, planar, reading, render, sensor, tilt_study, wrap,
+};
 use host_tests::real::read_xyz;
 use host_tests::sim::{fibonacci_sphere, Rng};
-use mag_cal_core::heading::heading_deg;
 use mag_cal_core::planar::{calibrate_planar, PlanarConfig, PlanarFit};
 use mag_cal_core::{calibrate, Config, Error};
-use nalgebra::{Matrix3, Rotation3, Vector3};
-
-/// The sensor: a symmetric soft iron (field 400 counts; symmetric, so the
-/// three-dimensional fit's frame is the body frame and its heading has no
-/// mounting error) and a hard iron.
-fn sensor() -> (Matrix3<f64>, Vector3<f64>) {
-    let s = Matrix3::new(1.15, 0.06, -0.03, 0.06, 0.92, 0.04, -0.03, 0.04, 1.02);
-    (s * 400.0, Vector3::new(120.0, -75.0, 40.0))
-}
-
-/// The earth's field in NED, inclination 60 deg, unit strength.
-fn earth() -> Vector3<f64> {
-    let inc = 60f64.to_radians();
-    Vector3::new(inc.cos(), 0.0, inc.sin())
-}
-
-/// World-to-body rotation of a vehicle at heading `psi`, pitch `theta`,
-/// roll `phi` (radians, the NED Euler convention).
-fn attitude(psi: f64, theta: f64, phi: f64) -> Matrix3<f64> {
-    let body_to_world = Rotation3::from_euler_angles(phi, theta, psi);
-    body_to_world.matrix().transpose()
-}
-
-/// A noisy reading (1 % of the field per axis) of the body field `h`.
-fn reading(h: Vector3<f64>, rng: &mut Rng) -> [f64; 3] {
-    let (t, b) = sensor();
-    let noise = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 4.0;
-    let y = t * h + b + noise;
-    [y.x, y.y, y.z]
-}
-
-/// `n` readings of two turns at a varying rate, with roll and pitch
-/// wandering within `tilt` degrees; and the true headings.
-fn level_turns(tilt: f64, n: usize, seed: u64) -> (Vec<[f64; 3]>, Vec<f64>) {
-    let mut rng = Rng::for_case(seed, 1);
-    let (mut samples, mut headings) = (Vec::new(), Vec::new());
-    let (p1, p2) = (rng.uniform() * 6.0, rng.uniform() * 6.0);
-    for i in 0..n {
-        let s = i as f64 / n as f64;
-        let psi = std::f64::consts::TAU * (2.0 * s + 0.1 * (9.0 * s).sin());
-        let k = tilt.to_radians();
-        let theta = k * (7.0 * s * std::f64::consts::TAU + p1).sin();
-        let phi = k * (5.0 * s * std::f64::consts::TAU + p2).cos();
-        let h = attitude(psi, theta, phi) * earth();
-        samples.push(reading(h, &mut rng));
-        headings.push(psi.to_degrees());
-    }
-    (samples, headings)
-}
-
-fn wrap(d: f64) -> f64 {
-    (d + 540.0).rem_euclid(360.0) - 180.0
-}
-
-/// RMS and largest heading error, after removing the constant offset (the
-/// circular mean of the differences: one alignment with a known heading,
-/// without that reading's noise).
-fn errors(est: &[f64], truth: &[f64]) -> (f64, f64) {
-    let (s, c) = est.iter().zip(truth).fold((0.0, 0.0), |(s, c), (h, t)| {
-        let d = (h - t).to_radians();
-        (s + d.sin(), c + d.cos())
-    });
-    let offset = f64::atan2(s, c).to_degrees();
-    let e: Vec<f64> = est
-        .iter()
-        .zip(truth)
-        .map(|(h, t)| wrap(h - t - offset))
-        .collect();
-    let rms = (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
-    (rms, e.iter().fold(0.0f64, |m, x| m.max(x.abs())))
-}
-
-fn planar(samples: &[[f64; 3]]) -> Result<PlanarFit<f64>, Error> {
-    calibrate_planar::<f64, _>(samples, &PlanarConfig::default())
-}
-
-/// Heading errors (RMS, largest) of one run.
-struct Comparison {
-    /// The planar fit of the tilted turns, on level turns.
-    planar_level: (f64, f64),
-    /// The 3-D fit of the same sensor on 400 full-sphere readings, on the
-    /// same level turns.
-    full_level: (f64, f64),
-    /// The planar fit on the tilted turns it was fitted to.
-    planar_tilted: (f64, f64),
-    /// The 3-D fit on the tilted turns, heading without tilt compensation.
-    full_tilted: (f64, f64),
-    fit: PlanarFit<f64>,
-}
-
-fn compare(tilt: f64, seed: u64, config: &PlanarConfig) -> Comparison {
-    let (tilted, tilted_truth) = level_turns(tilt, 300, seed);
-    let fit =
-        calibrate_planar::<f64, _>(&tilted, config).unwrap_or_else(|e| panic!("tilt {tilt}: {e}"));
-    let (level, truth) = level_turns(0.0, 300, seed + 1000);
-    let mut rng = Rng::for_case(seed, 2);
-    let sphere: Vec<[f64; 3]> = fibonacci_sphere(400)
-        .into_iter()
-        .map(|h| reading(h, &mut rng))
-        .collect();
-    let full = calibrate::<f64, _>(&sphere, &Config::default()).expect("3-D fit");
-    let planar_on = |s: &[[f64; 3]]| -> Vec<f64> {
-        s.iter().map(|y| fit.calibration.heading_deg(*y)).collect()
-    };
-    let full_on = |s: &[[f64; 3]]| -> Vec<f64> {
-        s.iter()
-            .map(|y| heading_deg(full.calibration.apply(*y)))
-            .collect()
-    };
-    Comparison {
-        planar_level: errors(&planar_on(&level), &truth),
-        full_level: errors(&full_on(&level), &truth),
-        planar_tilted: errors(&planar_on(&tilted), &tilted_truth),
-        full_tilted: errors(&full_on(&tilted), &tilted_truth),
-        fit,
-    }
-}
+use nalgebra::{Matrix3, Vector3};
 
 #[test]
 fn level_turns_give_the_heading_of_a_full_calibration() {
-    let seeds = 20;
-    // Measured past the default fit-error limit, which refuses the tilts
-    // of 10 deg (their fit error is about 0.2 of the horizontal field).
-    let mut wide = PlanarConfig::default();
-    wide.thresholds.refuse_fit_error = 1.0;
-    println!(
-        "| tilt while turning | planar, on level turns | 3-D fit, on level turns | planar, on the tilted turns | \
-         3-D fit, on the tilted turns | fit error | thickness | refused by default |"
-    );
-    println!("|---|---|---|---|---|---|---|---|");
-    for tilt in [0.0, 2.0, 5.0, 10.0] {
-        let mut runs: Vec<Comparison> = (0..seeds).map(|seed| compare(tilt, seed, &wide)).collect();
-        let refused = (0..seeds)
-            .filter(|&seed| {
-                let (s, _) = level_turns(tilt, 300, seed);
-                calibrate_planar::<f64, _>(&s, &PlanarConfig::default()).is_err()
-            })
-            .count();
-        for r in &runs {
-            assert!(
-                r.fit.report.axis_tilt_deg < 15.0,
-                "{}",
-                r.fit.report.axis_tilt_deg
-            );
-            assert_eq!(r.fit.report.sectors, 12);
-        }
-        let med = |runs: &mut Vec<Comparison>, f: fn(&Comparison) -> (f64, f64)| {
-            runs.sort_by(|a, b| f(a).0.total_cmp(&f(b).0));
-            f(&runs[runs.len() / 2])
-        };
-        let pl = med(&mut runs, |r| r.planar_level);
-        let fl = med(&mut runs, |r| r.full_level);
-        let pt = med(&mut runs, |r| r.planar_tilted);
-        let ft = med(&mut runs, |r| r.full_tilted);
-        let fe = med(&mut runs, |r| (r.fit.report.fit_error, 0.0)).0;
-        let th = med(&mut runs, |r| (r.fit.report.thickness, 0.0)).0;
-        println!(
-            "| {tilt} deg | {:.2} deg ({:.1}) | {:.2} deg ({:.1}) | {:.2} deg ({:.1}) | {:.2} deg ({:.1}) | \
-             {fe:.3} | {th:.3} | {refused} of {seeds} |",
-            pl.0, pl.1, fl.0, fl.1, pt.0, pt.1, ft.0, ft.1
-        );
-        if tilt == 0.0 {
+    let rows = tilt_study(&[0.0, 2.0, 5.0, 10.0], 20);
+    print!("{}", render(&rows));
+    for r in &rows {
+        assert!(r.sane, "{r:?}");
+        let (pl, fl) = (r.planar_level, r.full_level);
+        if r.tilt == 0.0 {
             // Level: the planar fit is as good as the full calibration (the
             // noise of a reading alone is 1.15 deg RMS of heading).
-            assert!(pl.0 < 1.5 && pl.0 < 1.1 * fl.0, "{pl:?} {fl:?}");
-            assert_eq!(refused, 0);
+            assert!(pl.0 < 1.5 && pl.0 < 1.1 * fl.0, "{r:?}");
         }
-        if tilt <= 5.0 {
-            assert_eq!(refused, 0, "tilt {tilt}");
+        if r.tilt <= 5.0 {
+            assert_eq!(r.refused, 0, "{r:?}");
         }
         // On tilted turns, both fits pay the tilt of an uncompensated
         // heading; the planar one no more than the 3-D one and its own
         // calibration error.
-        assert!(pt.0 < ft.0 + pl.0, "{tilt}: {pt:?} {ft:?} {pl:?}");
+        assert!(r.planar_tilted.0 < r.full_tilted.0 + pl.0, "{r:?}");
     }
 }
 

@@ -281,8 +281,14 @@ fn calibration<T: Real>(scalars: &'static Scalars<T>) {
     // calibration built from opaque parts.
     let config = mag_cal_core::planar::PlanarConfig::with_up(opaque(&[0.0, 0.0, -1.0]));
     let config = opaque(&config);
-    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(SAMPLES_I16.get(), &config));
-    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(SAMPLES_F32.get(), &config));
+    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(
+        SAMPLES_I16.get(),
+        &config,
+    ));
+    keep(mag_cal_core::planar::calibrate_planar::<f32, _>(
+        SAMPLES_F32.get(),
+        &config,
+    ));
     let parts = opaque(&scalars.rotation);
     if let Ok(planar) = mag_cal_core::planar::PlanarCalibration::new(
         parts[0],

@@ -26,8 +26,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use host_tests::contamination::{
-    percent, render_setting_table, render_table, run_study, splice_section, totals, Grid, Kind,
-    Precision, BAND_DEG, FIELD_COUNTS, FIELD_UT, NOISE_REL, RATIO_FLOOR, SIZES, WRONG_LIMIT,
+    percent, render_setting_table, render_table, run_study, totals, Grid, Kind, Precision,
+    BAND_DEG, FIELD_COUNTS, FIELD_UT, NOISE_REL, RATIO_FLOOR, SECTION, SIZES, WRONG_LIMIT,
 };
 use mag_cal_core::{calibrate, Config, Method};
 
@@ -228,7 +228,7 @@ fn main() -> ExitCode {
                 return ExitCode::from(2);
             }
         };
-        if let Err(e) = std::fs::write(path, splice_section(&old, &doc)) {
+        if let Err(e) = std::fs::write(path, host_tests::sections::splice(&old, SECTION, &doc)) {
             eprintln!("writing {}: {e}", path.display());
             return ExitCode::from(2);
         }

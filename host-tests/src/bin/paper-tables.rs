@@ -20,9 +20,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use host_tests::contamination::keep_section;
 use host_tests::metrics::{mean_std, median, Errors};
 use host_tests::scenarios::{HeadingScenario, SCENARIOS};
+use host_tests::sections::keep_all;
 use host_tests::study::{
     idx, relations, run_heading, run_scenario, sweep_windows, HeadingStudy, Relation,
     ScenarioStudy, Strictness, HEADING_METHODS, LABELS, METHODS, SMOOTH_WINDOW,
@@ -207,10 +207,10 @@ fn write_outputs(
 ) -> std::io::Result<()> {
     let figs = out.join("figures");
     std::fs::create_dir_all(&figs)?;
-    // Keep the section the `contamination-table` binary wrote, if any.
+    // Keep the sections other binaries wrote (contamination, planar, ...).
     let results = out.join("results.md");
     let markdown = match std::fs::read_to_string(&results) {
-        Ok(old) => keep_section(&doc.markdown, &old),
+        Ok(old) => keep_all(&doc.markdown, &old),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => doc.markdown.clone(),
         Err(e) => return Err(e),
     };
