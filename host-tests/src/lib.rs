@@ -1,5 +1,6 @@
 //! Host-side test support for mag-cal.
 
+pub mod background;
 pub mod contamination;
 pub mod metrics;
 pub mod planar;

@@ -1283,6 +1283,67 @@ fn fuzz_calibration_align_heading() {
     drive("fuzz_calibration_align_heading", 5000, others_case);
 }
 
+/// The background calibrator on arbitrary readings: any configuration,
+/// pushes and steps in any order; bounded state, finite calibrations.
+fn background_case(seed: u64, index: u64) -> Result<u64, String> {
+    use mag_cal_core::background::{Background, BackgroundConfig};
+    let mut rng = Rng::for_case(seed, index);
+    let (_, y) = sample_set(&mut rng);
+    let mut config = BackgroundConfig::default();
+    config.min_angle_deg = if rng.chance(0.5) {
+        rng.range(-5.0, 30.0) as f32
+    } else {
+        rng.any_f32()
+    };
+    config.refit_after = rng.index(100);
+    config.min_cells = rng.index(60);
+    config.slice = rng.index(70);
+    config.max_age = rng.below(3000) as u32;
+    config.stale_rms = if rng.chance(0.8) {
+        rng.range(-1.0, 6.0) as f32
+    } else {
+        rng.any_f32()
+    };
+    config.stale_readings = rng.below(300) as u32;
+    let mut bg: Background<f32, [f64; 3], 96, 2> = Background::new(config);
+    let mut calls = 0u64;
+    for _ in 0..3 {
+        for s in &y {
+            calls += 1;
+            bg.push(*s);
+            for _ in 0..rng.index(3) {
+                bg.step();
+            }
+            if bg.samples().len() > 96 || bg.progress() > 100 || bg.cells_filled() > 48 {
+                return Err(format!(
+                    "bounds: {} samples, progress {}, {} cells",
+                    bg.samples().len(),
+                    bg.progress(),
+                    bg.cells_filled()
+                ));
+            }
+            if let Some(c) = bg.calibration() {
+                let finite = c
+                    .hard_iron()
+                    .iter()
+                    .chain(c.soft_iron().iter().flatten())
+                    .all(|v| v.is_finite());
+                if !finite
+                    || c.field_strength().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                {
+                    return Err(format!("non-finite calibration {c:?}"));
+                }
+            }
+        }
+    }
+    Ok(calls)
+}
+
+#[test]
+fn fuzz_background() {
+    drive("fuzz_background", 600, background_case);
+}
+
 #[test]
 fn fuzz_collector_persist() {
     drive("fuzz_collector_persist", 2000, collector_persist_case);

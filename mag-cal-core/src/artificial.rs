@@ -245,6 +245,54 @@ fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
 /// triangles of `h h^T`, `g h^T = e h h^T` and `g g^T = e^2 h h^T` (6 each).
 const SUMS: usize = 24;
 
+/// The sums of a gated artificial-data pass taken over several pieces of
+/// the samples in turn (a pass in slices; [`crate::background`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PassSums<T: Real> {
+    count: usize,
+    total: [T; SUMS],
+}
+
+impl<T: Real> PassSums<T> {
+    /// No rows yet.
+    pub(crate) fn new() -> Self {
+        Self {
+            count: 0,
+            total: [T::zero(); SUMS],
+        }
+    }
+
+    /// Adds the rows of `samples` as [`Stats::accumulate_with`] takes them.
+    pub(crate) fn add<S: Sample>(
+        &mut self,
+        samples: &[S],
+        map: &Projector<T>,
+        pass: &Pass<'_, T>,
+        residuals: &mut Residuals<T>,
+    ) {
+        self.count += sums(
+            samples,
+            map,
+            Measure::Gated(pass, residuals),
+            &mut self.total,
+        );
+    }
+
+    /// The statistics of every row added, under the start `w`.
+    ///
+    /// # Errors
+    /// As [`Stats::accumulate_with`].
+    pub(crate) fn stats(&self, w: &Matrix3<T>) -> Result<Stats<T>, Error> {
+        if self.count < crate::normalize::MIN_SAMPLES {
+            return Err(Error::TooFewSamples {
+                found: self.count,
+                required: crate::normalize::MIN_SAMPLES,
+            });
+        }
+        Stats::from_sums(self.count, &self.total, w).ok_or(Error::NotAnEllipsoid)
+    }
+}
+
 /// Which rows an artificial-data pass uses.
 #[derive(Clone, Copy)]
 pub(crate) struct Pass<'a, T: Real> {

@@ -252,7 +252,7 @@ pub struct Progress {
 
 /// Running sums of the centre estimate, in `f32`, on `x = y - origin`.
 #[derive(Clone, Copy, Debug)]
-struct CentreFit {
+pub(crate) struct CentreFit {
     /// The first sample kept.
     origin: [f32; 3],
     /// Samples in the sums.
@@ -272,7 +272,7 @@ struct CentreFit {
 }
 
 impl CentreFit {
-    const EMPTY: CentreFit = CentreFit {
+    pub(crate) const EMPTY: CentreFit = CentreFit {
         origin: [0.0; 3],
         n: 0.0,
         mean: [0.0; 3],
@@ -284,7 +284,7 @@ impl CentreFit {
     };
 
     /// The sums with `y` added, or `None` when they would not be finite.
-    fn with(&self, y: [f32; 3]) -> Option<CentreFit> {
+    pub(crate) fn with(&self, y: [f32; 3]) -> Option<CentreFit> {
         let mut f = *self;
         if f.n == 0.0 {
             f.origin = y;
@@ -333,13 +333,13 @@ impl CentreFit {
     /// Mean squared distance of the samples from `centre` (sensor units):
     /// `mean|x - c|^2 = mean(q) - 2 c.mean(x) + |c|^2` with `c` relative to
     /// the origin.
-    fn radius_sq(&self, centre: [f32; 3]) -> f32 {
+    pub(crate) fn radius_sq(&self, centre: [f32; 3]) -> f32 {
         let c = sub(centre, self.origin);
         self.mean_q - 2.0 * dot(&c, &self.mean) + dot(&c, &c)
     }
 
     /// The centre estimate, sensor units.
-    fn centre(&self) -> [f32; 3] {
+    pub(crate) fn centre(&self) -> [f32; 3] {
         let mid = [
             0.5 * (self.lo[0] + self.hi[0]),
             0.5 * (self.lo[1] + self.hi[1]),
@@ -411,7 +411,7 @@ fn direction(y: [f32; 3], centre: [f32; 3]) -> Option<[f32; 3]> {
 /// `v` is zero or not finite. Band `floor(3 (z / |v| + 1))`, decided by
 /// comparing `9 z^2` with `|v|^2` and `4 |v|^2` (no square root); sector by
 /// octant of longitude from signs and `|x|` against `|y|` (no `atan2`).
-fn cell(v: [f32; 3]) -> Option<usize> {
+pub(crate) fn cell(v: [f32; 3]) -> Option<usize> {
     let [x, y, z] = v;
     let r2 = dot(&v, &v);
     if !(r2 > 0.0) || !r2.is_finite() {

@@ -107,7 +107,7 @@ pub fn fit_with<T: Real>(s: &SMatrix<T, 10, 10>, solve: Solve<T>) -> Result<Elli
 /// `v = [v9, -1]` with `S9 v9 = sum phi9` (Cholesky). Out of line: its
 /// arrays then occupy stack only during the call (docs/benchmarks.md).
 #[inline(never)]
-fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
+pub(crate) fn ls9<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error> {
     // Straight from `s`, not through a 10x10 copy (400 bytes of stack in
     // `f32` under the robust path's refits).
     let mut s9 = [[T::zero(); 9]; 9];

@@ -199,6 +199,7 @@
 
 pub mod align;
 mod artificial;
+pub mod background;
 mod calibration;
 pub mod collector;
 #[cfg(feature = "defmt")]
@@ -774,7 +775,7 @@ impl<T: Real> Figures<T> {
 /// [`quality::REFUSE_QUADRIC_GAP`]). Out of line, so the 10x10 scatter
 /// takes stack only while it is used.
 #[inline(never)]
-fn ls_step<T: Real>(
+pub(crate) fn ls_step<T: Real>(
     moments: &moments::Moments<T>,
     solve: ellipsoid::Solve<T>,
 ) -> (Result<ellipsoid::Ellipsoid<T>, Error>, Option<T>) {

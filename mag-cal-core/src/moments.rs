@@ -158,6 +158,20 @@ impl<T: Real> Moments<T> {
         Self { sums }
     }
 
+    /// Adds the sums of `other` (moments of more rows: power sums add).
+    pub(crate) fn add(&mut self, other: &Self) {
+        for (t, v) in self.sums.iter_mut().zip(other.sums) {
+            *t += v;
+        }
+    }
+
+    /// No rows.
+    pub(crate) fn zero() -> Self {
+        Self {
+            sums: [T::zero(); COUNT],
+        }
+    }
+
     /// Number of samples summed (the moment of degree 0).
     pub fn count(&self) -> usize {
         self.sums[0].to_count()

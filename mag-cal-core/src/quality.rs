@@ -584,52 +584,93 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     limit: Option<T>,
 ) -> Result<FinalPass<T>, Error> {
     let map = Projector::new(norm, centre, w);
-    let mut hist = LogHistogram::new();
-    let mut cells: Cells<T> = [(T::zero(), 0); LOF_CELLS];
-    let mut acc = Accumulated {
-        passed: 0,
-        used: 0,
-        max: T::zero(),
-        sums: [T::zero(); 10],
-    };
-    let spec = BlockSpec {
-        map: &map,
-        limit: limit.unwrap_or(T::MAX),
-        directions: directions.is_none(),
-    };
-    for (prev, block) in pieces(samples, BLOCK) {
-        if gate.is_plain() {
-            final_block(block, prev, &Finite, &spec, &mut hist, &mut cells, &mut acc);
-        } else {
-            final_block(block, prev, gate, &spec, &mut hist, &mut cells, &mut acc);
+    let mut sums = FinalSums::new();
+    sums.add(samples, &map, gate, limit, directions.is_none());
+    sums.finish(directions)
+}
+
+/// The running sums of a final pass, which may be taken over several
+/// pieces of the samples in turn (a pass in slices; [`crate::background`]).
+pub(crate) struct FinalSums<T: Real> {
+    hist: LogHistogram,
+    cells: Cells<T>,
+    acc: Accumulated<T>,
+}
+
+impl<T: Real> FinalSums<T> {
+    /// No rows yet.
+    pub(crate) fn new() -> Self {
+        Self {
+            hist: LogHistogram::new(),
+            cells: [(T::zero(), 0); LOF_CELLS],
+            acc: Accumulated {
+                passed: 0,
+                used: 0,
+                max: T::zero(),
+                sums: [T::zero(); 10],
+            },
         }
     }
-    let t = acc.sums;
-    let dirs = directions.unwrap_or(DirectionSums {
-        count: acc.used,
-        s_h: Vector3::new(t[1], t[2], t[3]),
-        s_hh: Matrix3::new(t[4], t[5], t[6], t[5], t[7], t[8], t[6], t[8], t[9]),
-    });
-    if acc.used < crate::MIN_SAMPLES || dirs.count == 0 {
-        return Err(Error::TooFewSamples {
-            found: acc.used,
-            required: crate::MIN_SAMPLES,
-        });
+
+    /// Adds the rows of `samples` the gate passes, under `map`, with the
+    /// residual `limit`; sums their directions when `directions` is set.
+    pub(crate) fn add<S: Sample>(
+        &mut self,
+        samples: &[S],
+        map: &Projector<T>,
+        gate: &Gate<T>,
+        limit: Option<T>,
+        directions: bool,
+    ) {
+        let spec = BlockSpec {
+            map,
+            limit: limit.unwrap_or(T::MAX),
+            directions,
+        };
+        let (hist, cells, acc) = (&mut self.hist, &mut self.cells, &mut self.acc);
+        for (prev, block) in pieces(samples, BLOCK) {
+            if gate.is_plain() {
+                final_block(block, prev, &Finite, &spec, hist, cells, acc);
+            } else {
+                final_block(block, prev, gate, &spec, hist, cells, acc);
+            }
+        }
     }
-    let (coverage, gram_condition) = direction_figures(&dirs)?;
-    let fit_error = crate::methods::robust_sigma(&hist).unwrap_or(T::zero());
-    let (lack_of_fit, misfit_significant) = lack_of_fit(&cells, fit_error);
-    Ok(FinalPass {
-        radial_rms: (t[0] / T::from_count(acc.used)).sqrt(),
-        coverage,
-        gram_condition,
-        passed: acc.passed,
-        used: acc.used,
-        fit_error,
-        lack_of_fit,
-        misfit_significant,
-        max_residual: acc.max,
-    })
+
+    /// The figures of every row added; `directions` replaces the summed
+    /// directions when given.
+    pub(crate) fn finish(
+        &self,
+        directions: Option<DirectionSums<T>>,
+    ) -> Result<FinalPass<T>, Error> {
+        let acc = &self.acc;
+        let t = acc.sums;
+        let dirs = directions.unwrap_or(DirectionSums {
+            count: acc.used,
+            s_h: Vector3::new(t[1], t[2], t[3]),
+            s_hh: Matrix3::new(t[4], t[5], t[6], t[5], t[7], t[8], t[6], t[8], t[9]),
+        });
+        if acc.used < crate::MIN_SAMPLES || dirs.count == 0 {
+            return Err(Error::TooFewSamples {
+                found: acc.used,
+                required: crate::MIN_SAMPLES,
+            });
+        }
+        let (coverage, gram_condition) = direction_figures(&dirs)?;
+        let fit_error = crate::methods::robust_sigma(&self.hist).unwrap_or(T::zero());
+        let (lack_of_fit, misfit_significant) = lack_of_fit(&self.cells, fit_error);
+        Ok(FinalPass {
+            radial_rms: (t[0] / T::from_count(acc.used)).sqrt(),
+            coverage,
+            gram_condition,
+            passed: acc.passed,
+            used: acc.used,
+            fit_error,
+            lack_of_fit,
+            misfit_significant,
+            max_residual: acc.max,
+        })
+    }
 }
 
 /// Coverage (`lambda_min` of the covariance of the directions) and the

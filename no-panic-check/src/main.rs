@@ -385,6 +385,34 @@ fn collector<S: Sample, T: Real>(samples: &'static RawSlice<S>, scalars: &'stati
     keep(default);
 }
 
+/// `background::Background`: any readings, any number of pushes and
+/// steps, every accessor.
+#[cfg(feature = "collector")]
+#[inline(never)]
+fn background<S: Sample, T: Real>(samples: &'static RawSlice<S>, scalars: &'static Scalars<T>) {
+    let config = opaque(&mag_cal_core::background::BackgroundConfig::DEFAULT);
+    let mut bg: mag_cal_core::background::Background<T, S, 96, 2> =
+        mag_cal_core::background::Background::new(config);
+    for _ in 0..opaque(&scalars.pushes) {
+        for sample in samples.get() {
+            keep(bg.push(*sample));
+            keep(bg.step());
+        }
+        if let Some(first) = samples.get().first() {
+            keep(bg.update(*first));
+        }
+    }
+    keep(bg.calibration());
+    keep(bg.current());
+    keep(bg.age());
+    keep(bg.is_stale());
+    keep(bg.progress());
+    keep(bg.cells_filled());
+    keep(bg.samples());
+    keep(bg.counters());
+    keep(bg.is_working());
+}
+
 /// `persist`: `from_bytes` and `crc32` on any bytes, `to_bytes` on what
 /// `from_bytes` accepts.
 #[cfg(feature = "persist")]
@@ -590,6 +618,8 @@ fn main() -> ! {
             collector::<[i16; 3], f32>(&SAMPLES_I16, &SCALARS_F32);
             collector::<[f32; 3], f32>(&SAMPLES_F32, &SCALARS_F32);
             collector::<[f64; 3], f64>(&SAMPLES_F64, &SCALARS_F64);
+            background::<[i16; 3], f32>(&SAMPLES_I16, &SCALARS_F32);
+            background::<[f32; 3], f32>(&SAMPLES_F32, &SCALARS_F32);
         }
         #[cfg(feature = "persist")]
         {

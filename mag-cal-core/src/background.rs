@@ -1,0 +1,1313 @@
+//! Calibration in the background, from ordinary use: no calibration dance.
+//!
+//! A [`Background`] takes every reading ([`Background::push`], constant
+//! work) and keeps an orientation-binned buffer of `N` samples: the
+//! directions of the readings, seen from the current calibration (before
+//! the first one, from a running sphere fit), fall into 48 equal-area cells
+//! of `K` samples each, and in a full cell the newest sample replaces the
+//! oldest. A device that dwells in one orientation thus refreshes one cell
+//! and cannot crowd out the others.
+//!
+//! [`Background::step`] does the rest in slices: each call processes at
+//! most [`BackgroundConfig::slice`] buffered samples (or one small solve),
+//! so that a control loop calling it once per reading is never blocked. A
+//! refit is the robust ADC2 of [`crate::calibrate`] started from the
+//! current calibration instead of screening: a pass for the residuals under
+//! the current calibration (its fit error on the buffer), the LS9 moments
+//! of the rows within [`crate::OUTLIER_CUT`] robust standard deviations,
+//! two artificial-data passes with the cut of the pass before, a final pass
+//! for the quality figures, and the judging of [`crate::quality`]. A new
+//! calibration is adopted only when every check passes and its robust fit
+//! error on the buffer is below the current calibration's.
+//!
+//! **Hard-iron tracking.** Under the current calibration every reading has
+//! a radial residual `|W (y - b)| - 1`. The running RMS of those residuals (time constant 32 readings) is
+//! watched in units of the calibration's own RMS on its buffer: when it
+//! stays above
+//! [`BackgroundConfig::stale_rms`] for [`BackgroundConfig::stale_readings`]
+//! readings, the calibration is stale ([`Background::is_stale`]): a
+//! persistent rise, not a burst. The
+//! offsets alone are then fitted ([`crate::offsets`], strength unchanged)
+//! to the recent readings; a moved hard iron fits a sphere of the known
+//! radius with a small residual and is adopted at once, while a magnet
+//! passing by does not and is not. After a new hard iron, the buffered
+//! samples inconsistent with it leave the buffer, so they cannot poison the
+//! next full refit.
+//!
+//! ```
+//! use mag_cal_core::background::{Background, BackgroundConfig};
+//!
+//! // 48 cells of 4 samples; f32.
+//! let mut bg: Background<f32, [f32; 3], 192, 4> = Background::new(BackgroundConfig::default());
+//! for k in 0..6000 {
+//!     // A device turned slowly through most orientations.
+//!     let z = (k as f32 * 0.0021).sin();
+//!     let r = (1.0 - z * z).sqrt();
+//!     let phi = k as f32 * 0.05;
+//!     let raw = [250.0 + 300.0 * r * phi.cos(), -80.0 + 330.0 * r * phi.sin(), 40.0 + 280.0 * z];
+//!     bg.push(raw);
+//!     bg.step();
+//! }
+//! let cal = bg.calibration().expect("calibrated in the background");
+//! assert!((cal.hard_iron()[0] - 250.0).abs() < 1.0);
+//! assert!(!bg.is_stale());
+//! ```
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::artificial::{Pass, PassSums, Residuals};
+use crate::collector::{self, CentreFit};
+use crate::ellipsoid::{self, Ellipsoid};
+use crate::linalg::{dot, larger, sym_inv_sqrt};
+use crate::methods::{adc2, robust_sigma, OUTLIER_CUT};
+use crate::moments::{Cut, Moments};
+use crate::normalize::{Normalization, Projector, MIN_SAMPLES};
+use crate::offsets::{refit_offsets, Strength};
+use crate::quality::{self, DirectionSums, Figures, FinalPass, FinalSums};
+use crate::rules::{check, Gate, Rules};
+use crate::sample::Sample;
+use crate::{Calibration, Error, Quality, Real, Thresholds, Warnings};
+
+/// Direction cells of the buffer (those of [`crate::collector`]).
+pub const CELLS: usize = collector::CELLS;
+
+/// Recent readings kept for an offsets-only fit.
+pub const RECENT: usize = 64;
+
+/// Residual cuts are never tighter than this (units of the field): a
+/// calibration that fits its buffer to a thousandth would otherwise call
+/// every reading of a noisier day an outlier.
+pub const MIN_SIGMA: f64 = 0.005;
+
+/// An offsets-only fit is adopted when its fit error is at most this many
+/// times the current calibration's (or [`OFFSETS_MAX_FIT_ERROR`], the
+/// larger).
+pub const OFFSETS_ERROR_RATIO: f64 = 2.0;
+
+/// See [`OFFSETS_ERROR_RATIO`].
+pub const OFFSETS_MAX_FIT_ERROR: f64 = 0.03;
+
+/// A refit replaces the calibration in use only when its robust fit error
+/// on the buffer is below this share of the calibration in use's: a
+/// margin over the noise of the figure, so that equally good fits do not
+/// replace each other (each new fit, fitted to the buffer, fits it a
+/// little better, if only by following its noise).
+pub const ADOPT_RATIO: f64 = 0.9;
+
+/// Nor when its coverage (`lambda_min` of the directions' covariance) is
+/// below this share of the calibration in use's. (Taking a fit below 0.75
+/// of the fit error whatever its coverage was measured and not taken: it
+/// doubled the median recovery after a hard-iron jump.)
+pub const ADOPT_COVERAGE: f64 = 0.9;
+
+// Measured and not taken (20 runs of each kind, `background-table`):
+// comparing the RMS over each fit's inliers instead of the robust fit
+// error (one false adoption during a magnet's pass, the median recovery
+// after a jump unchanged but its worst 3x longer), and clearing the
+// coverage of a calibration whose offsets were re-estimated (drift end
+// error 0.063 -> 0.073).
+
+/// Readings farther than this many field strengths from the calibrated
+/// unit sphere are not buffered (wild readings).
+pub const WILD_RESIDUAL: f64 = 1.0;
+
+/// What a [`Background`] does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct BackgroundConfig {
+    /// A reading is buffered only when its direction differs from the last
+    /// buffered one by at least this angle, degrees (as
+    /// [`crate::collector`]).
+    pub min_angle_deg: f32,
+    /// New buffered samples since the last refit before the next one.
+    pub refit_after: usize,
+    /// Cells holding samples before a refit (of [`CELLS`]). The judging
+    /// decides whether the coverage suffices; this only saves refits that
+    /// cannot pass.
+    pub min_cells: usize,
+    /// Buffered samples a call of [`Background::step`] processes.
+    pub slice: usize,
+    /// Once a calibration is in use, samples buffered more than this many
+    /// readings ago leave the buffer before each refit (0: never), so that
+    /// a slowly drifting hard iron is fitted from recent samples.
+    pub max_age: u32,
+    /// The calibration in use is watched by the running RMS of the radial
+    /// residuals of the readings (time constant 32 readings), in units of
+    /// its radial RMS on its buffer (at least [`MIN_SIGMA`]): above this
+    /// it has risen, and readings beyond it are "off".
+    pub stale_rms: f32,
+    /// Readings the rise must last before the calibration is stale (it
+    /// ends when the RMS falls below three quarters of
+    /// [`BackgroundConfig::stale_rms`]): longer than a disturbance that
+    /// passes (200: 4 s at 50 Hz).
+    pub stale_readings: u32,
+    /// The judging limits of a refit.
+    pub thresholds: Thresholds,
+}
+
+impl BackgroundConfig {
+    /// The defaults.
+    pub const DEFAULT: Self = Self {
+        min_angle_deg: collector::DEFAULT_MIN_ANGLE_DEG,
+        refit_after: 48,
+        min_cells: 20,
+        slice: 32,
+        max_age: 10_000,
+        stale_rms: 3.0,
+        stale_readings: 200,
+        thresholds: Thresholds::DEFAULT,
+    };
+}
+
+impl Default for BackgroundConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// What [`Background::push`] did with a reading.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Pushed {
+    /// Buffered.
+    Stored,
+    /// Not buffered: too close in direction to the last buffered reading
+    /// (still used to watch the calibration).
+    TooClose,
+    /// Not buffered: a glitch (zero row, rails), not finite, or beyond the
+    /// working precision.
+    Invalid,
+    /// Not buffered: far off the calibrated sphere (a wild reading).
+    Wild,
+}
+
+/// What [`Background::step`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Stepped {
+    /// Nothing to do.
+    Idle,
+    /// A slice of a refit or of a purge.
+    Working,
+    /// A refit ended with a new calibration.
+    Adopted,
+    /// A refit passed every check but does not fit the buffer better than
+    /// the current calibration, which stays.
+    Kept,
+    /// A refit was refused (the reason).
+    Refused(Error),
+    /// The calibration was stale and the offsets alone were re-estimated
+    /// and adopted.
+    OffsetsAdopted,
+    /// The calibration is stale but the offsets-only fit of the recent
+    /// readings was refused (the reason): a disturbance, or too few
+    /// directions yet.
+    OffsetsRefused(Error),
+}
+
+/// The calibration in use and how it fits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct Current<T: Real> {
+    /// The calibration.
+    pub calibration: Calibration<T>,
+    /// Its quality figures at the refit that produced it.
+    pub quality: Quality<T>,
+    /// Its warnings then.
+    pub warnings: Warnings,
+    /// Its robust fit error on the buffer (at its refit, or after an
+    /// offsets-only fit on the recent readings).
+    pub fit_error: T,
+    /// Its RMS radial residual on the buffer at its refit: the level the
+    /// stale watch measures against.
+    pub radial_rms: T,
+}
+
+/// Counters of what happened so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub struct Counters {
+    /// Readings pushed.
+    pub readings: u64,
+    /// Refits that ran to the end.
+    pub refits: u32,
+    /// Calibrations adopted by a refit.
+    pub adopted: u32,
+    /// Refits refused.
+    pub refused: u32,
+    /// Offsets-only fits adopted.
+    pub offsets_adopted: u32,
+    /// Offsets-only fits refused.
+    pub offsets_refused: u32,
+    /// Buffered samples dropped after a new hard iron.
+    pub purged: u32,
+}
+
+/// A refit's starting point, normalised: `x = (y - c) / s`, `u = W' x`.
+#[derive(Clone, Copy, Debug)]
+struct Prior<T: Real> {
+    norm: Normalization<T>,
+    w: Matrix3<T>,
+}
+
+/// An estimate in normalised coordinates: centre, `W'` and `T'`.
+#[derive(Clone, Copy, Debug)]
+struct Estimate<T: Real> {
+    centre: Vector3<T>,
+    w: Matrix3<T>,
+    t: Matrix3<T>,
+}
+
+/// Where a refit or purge is.
+#[allow(clippy::large_enum_variant)]
+enum Stage<T: Real> {
+    Idle,
+    /// Residuals under the prior.
+    Prior {
+        prior: Prior<T>,
+        pos: usize,
+        sums: FinalSums<T>,
+    },
+    /// LS9 moments of the rows within the prior's cut.
+    Moments {
+        prior: Prior<T>,
+        current_error: T,
+        pos: usize,
+        moments: Moments<T>,
+        limit: T,
+    },
+    /// The LS solve.
+    Solve {
+        prior: Prior<T>,
+        current_error: T,
+        moments: Moments<T>,
+        limit: T,
+    },
+    /// An artificial-data pass from `start`.
+    Adc {
+        prior: Prior<T>,
+        current_error: T,
+        figures: Partial<T>,
+        round: u8,
+        start: Estimate<T>,
+        limit: T,
+        pos: usize,
+        sums: PassSums<T>,
+        residuals: Residuals<T>,
+    },
+    /// The final pass under the estimate.
+    Final {
+        prior: Prior<T>,
+        current_error: T,
+        figures: Partial<T>,
+        est: Estimate<T>,
+        directions: DirectionSums<T>,
+        limit: T,
+        pos: usize,
+        sums: FinalSums<T>,
+    },
+    /// Dropping the samples older than [`BackgroundConfig::max_age`], then
+    /// the refit.
+    Age {
+        pos: usize,
+    },
+    /// Dropping the buffered samples that do not tell the new hard iron from
+    /// the old one `old`.
+    Purge {
+        pos: usize,
+        old: Calibration<T>,
+    },
+}
+
+/// The figures of the LS step, carried to the judging.
+#[derive(Clone, Copy, Debug)]
+struct Partial<T: Real> {
+    flatness: T,
+    quadric_gap: Option<T>,
+}
+
+/// The stale watch.
+#[derive(Clone, Copy, Debug)]
+struct Watch {
+    /// Running mean of the squared radial residual over the fit error
+    /// (clipped), time constant 32 readings.
+    mean_square: f32,
+    /// Readings since the rise began (0 when calm).
+    persistent: u32,
+}
+
+impl Watch {
+    /// Calm: the mean square of noise at the fit error.
+    const CALM: Self = Self {
+        mean_square: 1.0,
+        persistent: 0,
+    };
+}
+
+/// The background calibrator: `N` buffered samples in [`CELLS`] cells of
+/// `K` (`N` must be `CELLS * K`), calibrations in precision `T`.
+///
+/// Memory: `N` samples, `N` bytes of cell tags, `2 N` bytes of cell rings,
+/// [`RECENT`] recent samples and about 1.5 KB of refit state.
+pub struct Background<T: Real, S: Sample, const N: usize, const K: usize> {
+    config: BackgroundConfig,
+    store: heapless::Vec<S, N>,
+    cell_of: [u8; N],
+    /// The reading count when each sample was buffered (wrapping).
+    stamp: [u32; N],
+    ring: [[u16; K]; CELLS],
+    fill: [u8; CELLS],
+    head: [u8; CELLS],
+    sphere: CentreFit,
+    last_direction: Option<[f32; 3]>,
+    recent: heapless::Vec<S, RECENT>,
+    recent_next: usize,
+    recent_direction: Option<[f32; 3]>,
+    current: Option<Current<T>>,
+    adopted_at: u64,
+    new_samples: usize,
+    stage: Stage<T>,
+    watch: Watch,
+    last_offsets_try: u64,
+    counters: Counters,
+}
+
+impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> {
+    const SHAPE: () = assert!(
+        N == CELLS * K && K > 0 && K < 256 && N <= u16::MAX as usize,
+        "Background<_, _, N, K> needs N == 48 * K, 0 < K < 256"
+    );
+
+    /// An empty calibrator. A configuration value that is not positive and
+    /// finite where it must be (the angle may be 0) is replaced by its
+    /// default.
+    pub fn new(config: BackgroundConfig) -> Self {
+        let () = Self::SHAPE;
+        let d = BackgroundConfig::DEFAULT;
+        let config = BackgroundConfig {
+            min_angle_deg: if config.min_angle_deg >= 0.0 && config.min_angle_deg <= 180.0 {
+                config.min_angle_deg
+            } else {
+                d.min_angle_deg
+            },
+            stale_rms: if config.stale_rms > 0.0 && config.stale_rms.is_finite() {
+                config.stale_rms
+            } else {
+                d.stale_rms
+            },
+            slice: config.slice.max(1),
+            ..config
+        };
+        Self {
+            config,
+            store: heapless::Vec::new(),
+            cell_of: [0; N],
+            stamp: [0; N],
+            ring: [[0; K]; CELLS],
+            fill: [0; CELLS],
+            head: [0; CELLS],
+            sphere: CentreFit::EMPTY,
+            last_direction: None,
+            recent: heapless::Vec::new(),
+            recent_next: 0,
+            recent_direction: None,
+            current: None,
+            adopted_at: 0,
+            new_samples: 0,
+            stage: Stage::Idle,
+            watch: Watch::CALM,
+            last_offsets_try: 0,
+            counters: Counters::default(),
+        }
+    }
+
+    /// A calibrator that starts from a stored calibration (its fit error
+    /// as given, e.g. that of the fit's report).
+    pub fn with_calibration(config: BackgroundConfig, current: Current<T>) -> Self {
+        let mut bg = Self::new(config);
+        bg.current = Some(current);
+        bg
+    }
+
+    /// The calibration in use, if any.
+    pub fn calibration(&self) -> Option<&Calibration<T>> {
+        self.current.as_ref().map(|c| &c.calibration)
+    }
+
+    /// The calibration in use with its figures, if any.
+    pub fn current(&self) -> Option<&Current<T>> {
+        self.current.as_ref()
+    }
+
+    /// Readings since the calibration in use was adopted (or its offsets
+    /// re-estimated); `None` before the first.
+    pub fn age(&self) -> Option<u64> {
+        self.current
+            .as_ref()
+            .map(|_| self.counters.readings - self.adopted_at)
+    }
+
+    /// Whether the calibration in use no longer fits the readings (a
+    /// persistent rise of their residuals: the hard iron moved).
+    pub fn is_stale(&self) -> bool {
+        self.current.is_some() && self.watch.persistent >= self.config.stale_readings
+    }
+
+    /// Progress towards the first refit, `0..=100`: the smaller of the
+    /// share of [`BackgroundConfig::min_cells`] cells filled and of
+    /// [`BackgroundConfig::refit_after`] samples buffered (100 once a
+    /// calibration is in use).
+    pub fn progress(&self) -> u8 {
+        if self.current.is_some() {
+            return 100;
+        }
+        let share = |have: usize, need: usize| (have.min(need) * 100 / need.max(1)) as u8;
+        share(self.cells_filled(), self.config.min_cells).min(share(
+            self.store.len(),
+            self.config.refit_after.max(MIN_SAMPLES),
+        ))
+    }
+
+    /// Cells holding at least one buffered sample.
+    pub fn cells_filled(&self) -> usize {
+        self.fill.iter().filter(|&&f| f > 0).count()
+    }
+
+    /// The buffered samples (in no particular order).
+    pub fn samples(&self) -> &[S] {
+        &self.store
+    }
+
+    /// What happened so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Whether a refit or purge is under way.
+    pub fn is_working(&self) -> bool {
+        !matches!(self.stage, Stage::Idle)
+    }
+
+    /// Takes a reading: watches the calibration in use with it, and buffers
+    /// it when it adds a direction. Constant work.
+    pub fn push(&mut self, sample: S) -> Pushed {
+        self.counters.readings += 1;
+        let Ok(y) = check::<T, S>(&sample, None, &Rules::GLITCHES) else {
+            return Pushed::Invalid;
+        };
+        let y32 = [y[0].to_single(), y[1].to_single(), y[2].to_single()];
+        let direction_from = match &self.current {
+            Some(current) => {
+                let u = current.calibration.apply(y);
+                let r = dot(&u, &u).sqrt() - T::one();
+                if !r.is_finite() {
+                    return Pushed::Invalid;
+                }
+                let level = larger(
+                    larger(current.radial_rms, current.fit_error),
+                    T::lit(MIN_SIGMA),
+                );
+                let off = self.watch((r / level).to_single());
+                let u = [u[0].to_single(), u[1].to_single(), u[2].to_single()];
+                if off {
+                    // The readings the calibration no longer fits: those an
+                    // offsets-only fit takes when the rise persists.
+                    if let Some(dir) = unit(u) {
+                        self.remember(sample, dir);
+                    }
+                }
+                if r.abs() > T::lit(WILD_RESIDUAL) {
+                    return Pushed::Wild;
+                }
+                u
+            }
+            None => {
+                let c = self.sphere.centre();
+                if self.store.len() >= collector::OUTLIER_MIN_SAMPLES {
+                    let d = [y32[0] - c[0], y32[1] - c[1], y32[2] - c[2]];
+                    let r2 = self.sphere.radius_sq(c);
+                    let limit = collector::OUTLIER_RADII * collector::OUTLIER_RADII * r2;
+                    if !(dot(&d, &d) <= limit) {
+                        return Pushed::Wild;
+                    }
+                }
+                [y32[0] - c[0], y32[1] - c[1], y32[2] - c[2]]
+            }
+        };
+        let Some(dir) = unit(direction_from) else {
+            return Pushed::TooClose;
+        };
+        let Some(cell) = collector::cell(dir) else {
+            return Pushed::TooClose;
+        };
+        if let Some(last) = self.last_direction {
+            if !far_enough(&dir, &last, self.config.min_angle_deg) {
+                return Pushed::TooClose;
+            }
+        }
+        if self.current.is_none() {
+            match self.sphere.with(y32) {
+                Some(next) => self.sphere = next,
+                None => return Pushed::Invalid,
+            }
+        }
+        self.last_direction = Some(dir);
+        self.store_in(sample, cell);
+        self.new_samples += 1;
+        Pushed::Stored
+    }
+
+    /// Does at most one slice of work: a slice of a refit or purge, one
+    /// solve, or an offsets-only fit of the [`RECENT`] readings; starts a
+    /// refit when enough new samples and cells are buffered.
+    pub fn step(&mut self) -> Stepped {
+        if matches!(self.stage, Stage::Idle) {
+            if self.is_stale() && self.recent.len() >= RECENT / 2 {
+                return self.try_offsets();
+            }
+            if self.new_samples >= self.config.refit_after
+                && self.cells_filled() >= self.config.min_cells
+                && self.store.len() >= MIN_SAMPLES
+            {
+                self.new_samples = 0;
+                self.stage = if self.current.is_some() && self.config.max_age > 0 {
+                    Stage::Age { pos: 0 }
+                } else {
+                    self.start_refit()
+                };
+                return Stepped::Working;
+            }
+            return Stepped::Idle;
+        }
+        let stage = core::mem::replace(&mut self.stage, Stage::Idle);
+        let (next, result) = self.advance(stage);
+        self.stage = next;
+        result
+    }
+
+    /// [`Background::push`], then [`Background::step`].
+    pub fn update(&mut self, sample: S) -> Stepped {
+        self.push(sample);
+        self.step()
+    }
+
+    // ------------------------------------------------------------ buffer
+
+    /// Stores `sample` in `cell`, over the cell's oldest when it is full.
+    fn store_in(&mut self, sample: S, cell: usize) {
+        let (Some(ring), Some(fill), Some(head)) = (
+            self.ring.get_mut(cell),
+            self.fill.get_mut(cell),
+            self.head.get_mut(cell),
+        ) else {
+            return;
+        };
+        let k = usize::from(*fill);
+        if k < K {
+            let slot = self.store.len();
+            if self.store.push(sample).is_err() {
+                return;
+            }
+            if let Some(tag) = self.cell_of.get_mut(slot) {
+                *tag = cell as u8;
+            }
+            if let Some(t) = self.stamp.get_mut(slot) {
+                *t = self.counters.readings as u32;
+            }
+            if let Some(r) = ring.get_mut((usize::from(*head) + k) % K) {
+                *r = slot as u16;
+            }
+            *fill += 1;
+        } else {
+            // Full: the oldest (at the head) is overwritten and becomes the
+            // newest.
+            let h = usize::from(*head);
+            let slot = ring.get(h).copied().map_or(0, usize::from);
+            if let Some(s) = self.store.get_mut(slot) {
+                *s = sample;
+            }
+            if let Some(t) = self.stamp.get_mut(slot) {
+                *t = self.counters.readings as u32;
+            }
+            *head = ((h + 1) % K) as u8;
+        }
+    }
+
+    /// Removes buffered sample `slot` (the last one moves into its place).
+    fn remove(&mut self, slot: usize) {
+        let last = self.store.len().saturating_sub(1);
+        if slot > last || self.store.is_empty() {
+            return;
+        }
+        let cell = self.cell_of.get(slot).copied().map_or(0, usize::from);
+        self.unlink(cell, slot);
+        if slot != last {
+            let moved_cell = self.cell_of.get(last).copied().map_or(0, usize::from);
+            if let Some(ring) = self.ring.get_mut(moved_cell) {
+                for r in ring.iter_mut() {
+                    if usize::from(*r) == last {
+                        *r = slot as u16;
+                    }
+                }
+            }
+            if let Some(tag) = self.cell_of.get_mut(slot) {
+                *tag = moved_cell as u8;
+            }
+            let moved_stamp = self.stamp.get(last).copied().unwrap_or(0);
+            if let Some(t) = self.stamp.get_mut(slot) {
+                *t = moved_stamp;
+            }
+        }
+        // swap_remove, written out without its bounds assertion.
+        if let Some(moved) = self.store.pop() {
+            if let Some(s) = self.store.get_mut(slot) {
+                *s = moved;
+            }
+        }
+    }
+
+    /// Takes `slot` out of the ring of `cell`, keeping the others' order.
+    fn unlink(&mut self, cell: usize, slot: usize) {
+        let (Some(ring), Some(fill), Some(head)) = (
+            self.ring.get_mut(cell),
+            self.fill.get_mut(cell),
+            self.head.get_mut(cell),
+        ) else {
+            return;
+        };
+        let (h, k) = (usize::from(*head), usize::from(*fill));
+        let Some(at) =
+            (0..k).find(|&i| ring.get((h + i) % K).map(|&r| usize::from(r)) == Some(slot))
+        else {
+            return;
+        };
+        for i in at..k.saturating_sub(1) {
+            let next = ring.get((h + i + 1) % K).copied().unwrap_or(0);
+            if let Some(r) = ring.get_mut((h + i) % K) {
+                *r = next;
+            }
+        }
+        *fill -= 1;
+    }
+
+    /// Keeps `sample` among the recent readings when its direction differs
+    /// from the last one kept.
+    fn remember(&mut self, sample: S, dir: [f32; 3]) {
+        if let Some(last) = self.recent_direction {
+            if !far_enough(&dir, &last, self.config.min_angle_deg) {
+                return;
+            }
+        }
+        self.recent_direction = Some(dir);
+        if self.recent.push(sample).is_err() {
+            if let Some(s) = self.recent.get_mut(self.recent_next) {
+                *s = sample;
+            }
+            self.recent_next = (self.recent_next + 1) % RECENT;
+        }
+    }
+
+    /// Updates the stale watch with the residual of one reading in fit
+    /// errors; whether the reading is off.
+    fn watch(&mut self, z: f32) -> bool {
+        let limit = self.config.stale_rms;
+        // Clipped, so that one wild reading weighs as a strongly off one,
+        // not as hundreds (a non-finite one as the clip).
+        let clip = 4.0 * limit.abs();
+        let z = if z.abs() <= clip { z } else { clip };
+        let w = &mut self.watch;
+        w.mean_square += (z * z - w.mean_square) / 32.0;
+        if w.mean_square > limit * limit {
+            w.persistent = w.persistent.saturating_add(1);
+        } else if w.mean_square < 0.5625 * limit * limit {
+            // Calm again (hysteresis: a dip in directions that a moved hard
+            // iron hardly changes does not end a rise).
+            w.persistent = 0;
+            if w.mean_square < 0.25 * limit * limit {
+                // Off readings of an episode that ended are not the new
+                // hard iron's.
+                self.recent.clear();
+                self.recent_next = 0;
+                self.recent_direction = None;
+            }
+        }
+        z.abs() > limit
+    }
+
+    // ------------------------------------------------------------- refit
+
+    /// The start of a refit: the calibration in use, or the running sphere.
+    fn prior(&self) -> Prior<T> {
+        let (centre, scale, w) = match &self.current {
+            Some(c) => {
+                let rho = c.calibration.field_strength();
+                (c.calibration.hard_iron(), rho, c.calibration.w() * rho)
+            }
+            None => {
+                let c = self.sphere.centre();
+                let r = libm::sqrtf(self.sphere.radius_sq(c).max(0.0));
+                (
+                    c.map(T::from_single),
+                    T::from_single(r),
+                    Matrix3::identity(),
+                )
+            }
+        };
+        let scale = if scale > T::zero() && scale.is_finite() {
+            scale
+        } else {
+            T::one()
+        };
+        Prior {
+            norm: Normalization {
+                centre: Vector3::from(centre),
+                scale,
+                inv_scale: T::one() / scale,
+            },
+            w,
+        }
+    }
+
+    /// The next slice of the buffer from `pos`, and the position after it.
+    fn slice(&self, pos: usize) -> (&[S], usize) {
+        let end = pos
+            .saturating_add(self.config.slice.max(1))
+            .min(self.store.len());
+        (self.store.get(pos..end).unwrap_or(&[]), end)
+    }
+
+    /// One slice of `stage`; the stage after it and what to report.
+    fn advance(&mut self, stage: Stage<T>) -> (Stage<T>, Stepped) {
+        let plain = Gate::PLAIN;
+        match stage {
+            Stage::Idle => (Stage::Idle, Stepped::Idle),
+            Stage::Prior {
+                prior,
+                pos,
+                mut sums,
+            } => {
+                let (rows, end) = self.slice(pos);
+                let map = Projector::new(&prior.norm, &Vector3::zeros(), &prior.w);
+                sums.add(rows, &map, &plain, None, true);
+                if end < self.store.len() {
+                    return (
+                        Stage::Prior {
+                            prior,
+                            pos: end,
+                            sums,
+                        },
+                        Stepped::Working,
+                    );
+                }
+                match sums.finish(None) {
+                    Ok(pass) => {
+                        let limit = cut(pass.fit_error);
+                        let stage = Stage::Moments {
+                            prior,
+                            current_error: pass.fit_error,
+                            pos: 0,
+                            moments: Moments::zero(),
+                            limit,
+                        };
+                        (stage, Stepped::Working)
+                    }
+                    Err(e) => self.refused(e),
+                }
+            }
+            Stage::Moments {
+                prior,
+                current_error,
+                pos,
+                mut moments,
+                limit,
+            } => {
+                let (rows, end) = self.slice(pos);
+                let c = Cut {
+                    map: Projector::new(&prior.norm, &Vector3::zeros(), &prior.w),
+                    limit,
+                };
+                moments.add(&Moments::accumulate_with(
+                    rows,
+                    &prior.norm,
+                    &plain,
+                    Some(&c),
+                    None,
+                ));
+                let stage = if end < self.store.len() {
+                    Stage::Moments {
+                        prior,
+                        current_error,
+                        pos: end,
+                        moments,
+                        limit,
+                    }
+                } else {
+                    Stage::Solve {
+                        prior,
+                        current_error,
+                        moments,
+                        limit,
+                    }
+                };
+                (stage, Stepped::Working)
+            }
+            Stage::Solve {
+                prior,
+                current_error,
+                moments,
+                limit,
+            } => {
+                let count = moments.count();
+                let flatness = match quality::flatness(&moments, count) {
+                    Ok(f) => f,
+                    Err(e) => return self.refused(e),
+                };
+                let (ls, quadric_gap) = crate::ls_step(&moments, ellipsoid::ls9);
+                let ls: Ellipsoid<T> = match ls {
+                    Ok(ls) => ls,
+                    Err(e) => {
+                        // Planar data fail the LS fit: say so.
+                        let mut figures = empty_figures(self.store.len());
+                        figures.flatness = Some(flatness);
+                        let e = match quality::judge(&figures, &self.config.thresholds) {
+                            Err(refusal) => refusal,
+                            Ok(_) => e,
+                        };
+                        return self.refused(e);
+                    }
+                };
+                let stage = Stage::Adc {
+                    prior,
+                    current_error,
+                    figures: Partial {
+                        flatness,
+                        quadric_gap,
+                    },
+                    round: 0,
+                    start: Estimate {
+                        centre: ls.centre,
+                        w: ls.w,
+                        t: ls.t,
+                    },
+                    limit,
+                    pos: 0,
+                    sums: PassSums::new(),
+                    residuals: Residuals::new(),
+                };
+                (stage, Stepped::Working)
+            }
+            Stage::Adc {
+                prior,
+                current_error,
+                figures,
+                round,
+                start,
+                limit,
+                pos,
+                mut sums,
+                mut residuals,
+            } => {
+                let (rows, end) = self.slice(pos);
+                let map = Projector::new(&prior.norm, &start.centre, &start.w);
+                let pass = Pass {
+                    gate: &plain,
+                    limit: Some(limit),
+                };
+                sums.add(rows, &map, &pass, &mut residuals);
+                if end < self.store.len() {
+                    let stage = Stage::Adc {
+                        prior,
+                        current_error,
+                        figures,
+                        round,
+                        start,
+                        limit,
+                        pos: end,
+                        sums,
+                        residuals,
+                    };
+                    return (stage, Stepped::Working);
+                }
+                let solved = sums.stats(&start.w).and_then(|stats| {
+                    let sol = adc2::solve_closed_form(&stats, &start.t, &start.centre)?;
+                    let w = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
+                    Ok((stats, sol, w))
+                });
+                let (stats, sol, w) = match solved {
+                    Ok(s) => s,
+                    Err(e) => return self.refused(e),
+                };
+                let est = Estimate {
+                    centre: sol.centre,
+                    w,
+                    t: sol.t,
+                };
+                let sigma = robust_sigma::<T>(&residuals.hist).unwrap_or(T::zero());
+                let stage = if round == 0 {
+                    Stage::Adc {
+                        prior,
+                        current_error,
+                        figures,
+                        round: 1,
+                        start: est,
+                        limit: cut(sigma),
+                        pos: 0,
+                        sums: PassSums::new(),
+                        residuals: Residuals::new(),
+                    }
+                } else {
+                    Stage::Final {
+                        prior,
+                        current_error,
+                        figures,
+                        est,
+                        directions: DirectionSums::from(&stats),
+                        limit: cut(sigma),
+                        pos: 0,
+                        sums: FinalSums::new(),
+                    }
+                };
+                (stage, Stepped::Working)
+            }
+            Stage::Final {
+                prior,
+                current_error,
+                figures,
+                est,
+                directions,
+                limit,
+                pos,
+                mut sums,
+            } => {
+                let (rows, end) = self.slice(pos);
+                let map = Projector::new(&prior.norm, &est.centre, &est.w);
+                sums.add(rows, &map, &plain, Some(limit), false);
+                if end < self.store.len() {
+                    let stage = Stage::Final {
+                        prior,
+                        current_error,
+                        figures,
+                        est,
+                        directions,
+                        limit,
+                        pos: end,
+                        sums,
+                    };
+                    return (stage, Stepped::Working);
+                }
+                let result = sums
+                    .finish(Some(directions))
+                    .and_then(|last| self.judge(&prior, &figures, &est, &last));
+                self.counters.refits += 1;
+                match result {
+                    Ok(current) => {
+                        let better = current.fit_error < current_error * T::lit(ADOPT_RATIO);
+                        // Nor when its directions cover much less than
+                        // those of the calibration in use: a fit of a
+                        // narrower buffer (after a purge) follows its noise.
+                        let covered = self.current.is_none_or(|c| {
+                            current.quality.coverage >= c.quality.coverage * T::lit(ADOPT_COVERAGE)
+                        });
+                        if self.current.is_some() && !(better && covered) {
+                            return (Stage::Idle, Stepped::Kept);
+                        }
+                        self.adopt(current, false);
+                        self.counters.adopted += 1;
+                        (Stage::Idle, Stepped::Adopted)
+                    }
+                    Err(e) => self.refused(e),
+                }
+            }
+            Stage::Age { mut pos } => {
+                let now = self.counters.readings as u32;
+                let mut seen = 0;
+                while pos < self.store.len() && seen < self.config.slice.max(1) {
+                    seen += 1;
+                    let stamp = self.stamp.get(pos).copied().unwrap_or(now);
+                    if now.wrapping_sub(stamp) > self.config.max_age {
+                        self.remove(pos);
+                    } else {
+                        pos += 1;
+                    }
+                }
+                if pos < self.store.len() {
+                    (Stage::Age { pos }, Stepped::Working)
+                } else if self.store.len() >= MIN_SAMPLES
+                    && self.cells_filled() >= self.config.min_cells
+                {
+                    (self.start_refit(), Stepped::Working)
+                } else {
+                    (Stage::Idle, Stepped::Working)
+                }
+            }
+            Stage::Purge { mut pos, old } => {
+                let Some(current) = self.current else {
+                    return (Stage::Idle, Stepped::Idle);
+                };
+                let sigma = larger(current.fit_error, T::lit(MIN_SIGMA));
+                let limit = sigma * T::lit(OUTLIER_CUT);
+                let fits = |cal: &Calibration<T>, s: &S| {
+                    let u = cal.apply(*s);
+                    (dot(&u, &u).sqrt() - T::one()).abs() <= limit
+                };
+                let mut seen = 0;
+                while pos < self.store.len() && seen < self.config.slice.max(1) {
+                    seen += 1;
+                    // Kept: rows the new hard iron fits and the old does
+                    // not (taken after the change). Rows both fit are
+                    // biased by up to the limit in the old direction and
+                    // would pull the next refit back.
+                    let keep = self
+                        .store
+                        .get(pos)
+                        .is_some_and(|s| fits(&current.calibration, s) && !fits(&old, s));
+                    if keep {
+                        pos += 1;
+                    } else {
+                        self.remove(pos);
+                        self.counters.purged += 1;
+                    }
+                }
+                if pos < self.store.len() {
+                    (Stage::Purge { pos, old }, Stepped::Working)
+                } else {
+                    (Stage::Idle, Stepped::Working)
+                }
+            }
+        }
+    }
+
+    /// The first stage of a refit.
+    fn start_refit(&self) -> Stage<T> {
+        Stage::Prior {
+            prior: self.prior(),
+            pos: 0,
+            sums: FinalSums::new(),
+        }
+    }
+
+    /// Figures to a calibration or a refusal (the core's judging).
+    fn judge(
+        &self,
+        prior: &Prior<T>,
+        partial: &Partial<T>,
+        est: &Estimate<T>,
+        last: &FinalPass<T>,
+    ) -> Result<Current<T>, Error> {
+        let distortion = quality::distortion(&est.w)?;
+        let mut figures = empty_figures(self.store.len());
+        figures.used = Some(last.used);
+        figures.flatness = Some(partial.flatness);
+        figures.quadric_gap = partial.quadric_gap;
+        figures.distortion = Some(distortion);
+        figures.coverage = Some(last.coverage);
+        figures.gram_condition = Some(last.gram_condition);
+        figures.radial_rms = Some(last.radial_rms);
+        figures.fit_error = Some(last.fit_error);
+        figures.lack_of_fit = Some(last.lack_of_fit);
+        figures.misfit_significant = last.misfit_significant;
+        let warnings = quality::judge(&figures, &self.config.thresholds)?;
+        let calibration = Calibration::from_normalised_w(&prior.norm, &est.w, &est.centre)?;
+        Ok(Current {
+            calibration,
+            quality: Quality {
+                flatness: partial.flatness,
+                quadric_gap: partial.quadric_gap.unwrap_or(T::zero()),
+                distortion,
+                coverage: last.coverage,
+                gram_condition: last.gram_condition,
+                fit_error: last.fit_error,
+                lack_of_fit: last.lack_of_fit,
+                outlier_share: figures.outlier_share().unwrap_or(T::zero()),
+            },
+            warnings,
+            fit_error: last.fit_error,
+            radial_rms: last.radial_rms,
+        })
+    }
+
+    fn refused(&mut self, e: Error) -> (Stage<T>, Stepped) {
+        self.counters.refused += 1;
+        (Stage::Idle, Stepped::Refused(e))
+    }
+
+    /// Puts `current` in use. After a new hard iron (`reset_watch`) the
+    /// stale watch starts again; after a refit it goes on, so that a drift
+    /// the refit followed only in part still shows.
+    fn adopt(&mut self, current: Current<T>, reset_watch: bool) {
+        self.current = Some(current);
+        self.adopted_at = self.counters.readings;
+        if reset_watch {
+            self.watch = Watch::CALM;
+        }
+        // Directions are now seen from the new calibration.
+        self.last_direction = None;
+        self.recent_direction = None;
+    }
+
+    /// The offsets-only fit of the recent readings (one call).
+    fn try_offsets(&mut self) -> Stepped {
+        let Some(current) = self.current else {
+            return Stepped::Idle;
+        };
+        // Not again before half the recent readings are new.
+        if self.counters.readings < self.last_offsets_try + (RECENT / 2) as u64 {
+            return Stepped::Idle;
+        }
+        self.last_offsets_try = self.counters.readings;
+        let fit = refit_offsets(&self.recent, &current.calibration, Strength::Unchanged);
+        let limit = larger(
+            current.fit_error * T::lit(OFFSETS_ERROR_RATIO),
+            T::lit(OFFSETS_MAX_FIT_ERROR),
+        );
+        let result = fit.and_then(|fit| {
+            let outliers = fit.rejected * 4 > fit.samples_used;
+            if fit.fit_error > limit || outliers {
+                Err(Error::NoSphere {
+                    fit_error: crate::Figure::new(fit.fit_error.to_single()),
+                    limit: crate::Figure::new(limit.to_single()),
+                })
+            } else {
+                Ok(fit)
+            }
+        });
+        match result {
+            Ok(fit) => {
+                self.adopt(
+                    Current {
+                        calibration: fit.calibration,
+                        quality: current.quality,
+                        warnings: current.warnings,
+                        fit_error: larger(fit.fit_error, current.fit_error),
+                        radial_rms: current.radial_rms,
+                    },
+                    true,
+                );
+                self.counters.offsets_adopted += 1;
+                self.recent.clear();
+                self.recent_next = 0;
+                self.new_samples = 0;
+                self.stage = Stage::Purge {
+                    pos: 0,
+                    old: current.calibration,
+                };
+                Stepped::OffsetsAdopted
+            }
+            Err(e) => {
+                self.counters.offsets_refused += 1;
+                Stepped::OffsetsRefused(e)
+            }
+        }
+    }
+}
+
+/// The residual cut of a pass: [`OUTLIER_CUT`] robust standard deviations
+/// of the pass before, at least [`MIN_SIGMA`] of them.
+fn cut<T: Real>(sigma: T) -> T {
+    larger(sigma, T::lit(MIN_SIGMA)) * T::lit(OUTLIER_CUT)
+}
+
+/// The judging's figures before any is computed (`valid` rows, robust).
+fn empty_figures<T: Real>(valid: usize) -> Figures<T> {
+    Figures {
+        valid,
+        used: None,
+        drops: crate::rules::Drops::default(),
+        robust: true,
+        judge_lack_of_fit: true,
+        low_spread: false,
+        flatness: None,
+        quadric_gap: None,
+        distortion: None,
+        coverage: None,
+        gram_condition: None,
+        radial_rms: None,
+        fit_error: None,
+        lack_of_fit: None,
+        misfit_significant: false,
+        field_deviation: None,
+        step_warnings: Warnings::NONE,
+    }
+}
+
+/// `v / |v|`, or `None` for a zero or non-finite `v`.
+fn unit(v: [f32; 3]) -> Option<[f32; 3]> {
+    let r = libm::sqrtf(dot(&v, &v));
+    if !(r > 0.0) || !r.is_finite() {
+        return None;
+    }
+    Some([v[0] / r, v[1] / r, v[2] / r])
+}
+
+/// Whether two unit directions differ by at least `deg` (by the chord).
+fn far_enough(a: &[f32; 3], b: &[f32; 3], deg: f32) -> bool {
+    let chord = 2.0 * libm::sinf(0.5 * deg.max(0.0).to_radians());
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    dot(&d, &d) > chord * chord
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::Rng;
+
+    /// The rings, fill counts and cell tags describe the store exactly.
+    fn consistent<const N: usize, const K: usize>(bg: &Background<f32, [f32; 3], N, K>) {
+        let mut seen = [false; N];
+        let mut total = 0;
+        for cell in 0..CELLS {
+            let (h, k) = (usize::from(bg.head[cell]), usize::from(bg.fill[cell]));
+            assert!(k <= K);
+            for i in 0..k {
+                let slot = usize::from(bg.ring[cell][(h + i) % K]);
+                assert!(slot < bg.store.len(), "cell {cell}: slot {slot}");
+                assert!(!seen[slot], "slot {slot} twice");
+                assert_eq!(usize::from(bg.cell_of[slot]), cell);
+                seen[slot] = true;
+            }
+            total += k;
+        }
+        assert_eq!(total, bg.store.len());
+    }
+
+    #[test]
+    fn the_buffer_stays_consistent_through_replacements_and_removals() {
+        let mut rng = Rng(7);
+        let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig {
+            min_angle_deg: 0.0,
+            ..BackgroundConfig::DEFAULT
+        });
+        for round in 0..2000 {
+            let v = [
+                rng.symmetric() as f32,
+                rng.symmetric() as f32,
+                rng.symmetric() as f32,
+            ];
+            let cell = collector::cell(v).unwrap_or(0);
+            bg.store_in(v.map(|x| x * 100.0), cell);
+            if round % 7 == 0 && !bg.store.is_empty() {
+                let slot = (rng.uniform() * bg.store.len() as f64) as usize;
+                bg.remove(slot);
+            }
+            consistent(&bg);
+        }
+        assert!(bg.store.len() > 48, "{}", bg.store.len());
+    }
+
+    #[test]
+    fn a_full_cell_replaces_its_oldest_sample() {
+        let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig::DEFAULT);
+        for k in 0..5 {
+            bg.store_in([k as f32, 0.0, 0.0], 3);
+        }
+        // Two slots: the last two samples, 3 and 4.
+        assert_eq!(bg.store.len(), 2);
+        let mut kept: heapless::Vec<f32, 2> = bg.store.iter().map(|s| s[0]).collect();
+        kept.sort_unstable_by(f32::total_cmp);
+        assert_eq!(kept.as_slice(), &[3.0, 4.0]);
+        consistent(&bg);
+    }
+}
