@@ -109,7 +109,8 @@ verify_bench() {
     run_qemu "$elf" -icount shift=0 -singlestep -d exec,nochain -D "$dir/exec" >"$dir/log2"
     wait "$awk_pid"
     # Regions: 1 the empty measurement, 2 the check loop, then one per
-    # BENCH line except adc2-other (computed), in order; `# <name>: mean of
+    # BENCH line except adc2-other (computed) and the background-* figures
+    # (single calls timed without markers), in order; `# <name>: mean of
     # <k> calls` gives the repetitions.
     local status=0
     LC_ALL=C awk -v regions="$dir/regions" '
@@ -121,7 +122,7 @@ verify_bench() {
         /^BENCH / { names[++nb] = $2; ns[nb] = $3; v[nb] = $4; next }
         END {
             for (i = 1; i <= nb; i++) {
-                if (names[i] == "adc2-other") continue
+                if (names[i] == "adc2-other" || names[i] ~ /^background-/) continue
                 k++
                 split(v[i], kv, "=")
                 calls = reps[names[i] ":"] ? reps[names[i] ":"] : 1

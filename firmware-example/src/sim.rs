@@ -394,6 +394,73 @@ pub enum Motion {
         /// Heading of the first stop, degrees.
         offset_deg: u32,
     },
+    /// Ordinary use, no calibration dance: the heading walks and turns now
+    /// and then, roll and pitch wander about level (about 12 deg), and
+    /// about every 600 samples the device is tilted by 30-80 deg for a few
+    /// hundred samples (picked up, put on its side); never a full tumble.
+    OrdinaryUse,
+}
+
+/// The state of [`Motion::OrdinaryUse`]: attitude, tilt episode, turn rate.
+#[derive(Clone, Debug)]
+struct Walk {
+    rng: Gaussian,
+    psi: f64,
+    theta: f64,
+    phi: f64,
+    target_theta: f64,
+    target_phi: f64,
+    episode: u32,
+    turn: f64,
+}
+
+impl Walk {
+    fn new(seed: u64) -> Self {
+        Self {
+            rng: Gaussian::new(seed ^ 0x5741_4c4b),
+            psi: 0.0,
+            theta: 0.0,
+            phi: 0.0,
+            target_theta: 0.0,
+            target_phi: 0.0,
+            episode: 0,
+            turn: 0.0,
+        }
+    }
+
+    /// The next attitude; the field direction in the body frame and the
+    /// heading, degrees.
+    fn next(&mut self, dip_deg: f64) -> ([f64; 3], f64) {
+        let u = self.rng.rng.uniform();
+        if self.episode == 0 && u < 1.0 / 600.0 {
+            self.episode = 150 + (self.rng.rng.uniform() * 300.0) as u32;
+            let tilt = (30.0 + 50.0 * self.rng.rng.uniform()).to_radians();
+            let (s, c) = libm::sincos(2.0 * PI * self.rng.rng.uniform());
+            self.target_theta = tilt * c;
+            self.target_phi = tilt * s;
+        }
+        if self.episode > 0 {
+            self.episode -= 1;
+            if self.episode == 0 {
+                self.target_theta = 0.0;
+                self.target_phi = 0.0;
+            }
+        }
+        if self.rng.rng.uniform() < 1.0 / 200.0 {
+            self.turn = self.rng.sample() * 0.03;
+        }
+        self.psi += self.turn + self.rng.sample() * 0.01;
+        self.theta += 0.02 * (self.target_theta - self.theta) + self.rng.sample() * 0.012;
+        self.phi += 0.02 * (self.target_phi - self.phi) + self.rng.sample() * 0.012;
+        // h = R^T f with R = Rz(psi) Ry(theta) Rx(phi) (body to NED).
+        let (sd, cd) = libm::sincos(dip_deg.to_radians());
+        let r = rotation_zyx([self.psi, self.theta, self.phi].map(f64::to_degrees));
+        let f = [cd, 0.0, sd];
+        let h = [0, 1, 2].map(|j| (0..3).map(|i| r[i][j] * f[i]).sum::<f64>());
+        let d = libm::fmod(self.psi.to_degrees(), 360.0);
+        let heading = if d < 0.0 { d + 360.0 } else { d };
+        (h, heading)
+    }
 }
 
 /// One simulated sample and its truth.
@@ -502,6 +569,8 @@ pub struct Simulator {
     spiral_phi: f64,
     /// Fault episodes injected.
     injected: InjectedCounts,
+    /// The attitude of [`Motion::OrdinaryUse`].
+    walk: Walk,
 }
 
 impl Simulator {
@@ -525,6 +594,7 @@ impl Simulator {
             step: 0,
             spiral_phi: 0.0,
             injected: InjectedCounts::default(),
+            walk: Walk::new(scenario.seed),
         }
     }
 
@@ -551,6 +621,11 @@ impl Simulator {
             - t[0][1] * (t[1][0] * t[2][2] - t[1][2] * t[2][0])
             + t[0][2] * (t[1][0] * t[2][1] - t[1][1] * t[2][0]);
         libm::cbrt(libm::fabs(det))
+    }
+
+    /// Moves the hard iron to `b`, counts (a part got magnetised).
+    pub fn set_hard_iron(&mut self, b: [f64; 3]) {
+        self.scenario.hard_iron = b;
     }
 
     /// Changes the motion; its schedule restarts.
@@ -594,6 +669,7 @@ impl Simulator {
                 let (sp, cp) = libm::sincos(psi.to_radians());
                 ([cd * cp, -cd * sp, sd], psi)
             }
+            Motion::OrdinaryUse => self.walk.next(self.scenario.dip_deg),
         }
     }
 
@@ -635,7 +711,7 @@ impl Simulator {
         let f = &self.scenario.faults;
         let phase = match self.motion {
             Motion::Sweep => &f.sweep,
-            Motion::LevelTurn { .. } => &f.level_turn,
+            Motion::LevelTurn { .. } | Motion::OrdinaryUse => &f.level_turn,
         };
         let mut injected = Injected::default();
         let mut field = [0.0; 3];

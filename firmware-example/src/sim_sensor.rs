@@ -644,6 +644,36 @@ impl Bench<'_> {
             });
     }
 
+    /// Start ordinary use (no calibration dance).
+    pub fn begin_ordinary_use(&mut self) {
+        defmt::info!("simulator: ordinary use: heading changes, tilts now and then, no tumbling");
+        self.dev
+            .borrow_mut()
+            .simulator()
+            .set_motion(Motion::OrdinaryUse);
+    }
+
+    /// Moves the hard iron by `delta` counts (a part got magnetised).
+    pub fn move_hard_iron(&mut self, delta: [f64; 3]) {
+        let mut dev = self.dev.borrow_mut();
+        let sim = dev.simulator();
+        let b = sim.hard_iron();
+        sim.set_hard_iron([b[0] + delta[0], b[1] + delta[1], b[2] + delta[2]]);
+        defmt::info!(
+            "simulator: the hard iron moved by ({=f64}, {=f64}, {=f64}) counts",
+            delta[0],
+            delta[1],
+            delta[2]
+        );
+    }
+
+    /// The noise of the simulated sensor over its field strength.
+    pub fn relative_noise(&self) -> f32 {
+        let mut dev = self.dev.borrow_mut();
+        let sim = dev.simulator();
+        (sim.scenario().noise / sim.field_strength()) as f32
+    }
+
     /// Application boots in one run: 1, erased flash, nothing stored:
     /// calibrate and store; 2, load the stored calibration and skip the
     /// calibration; 3, after a bit of the record was flipped, the load

@@ -230,6 +230,9 @@ fn test_all() -> Result<(), String> {
     run_on_qemu("ontarget")?;
     // The board example to copy, on the emulated board.
     run_on_qemu("compass")?;
+    // Calibration in the background from ordinary use, with a hard-iron
+    // jump (exits non-zero out of its bounds).
+    run_on_qemu("background")?;
     let fw = firmware_dir();
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
     qemu_demo()?;

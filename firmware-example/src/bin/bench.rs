@@ -529,5 +529,70 @@ fn main() -> ! {
         ok &= calibration(&timer, "adc2", samples, Method::Adc2).is_some();
     }
 
+    ok &= background(&timer);
     platform::exit(ok)
 }
+
+/// The background calibrator (`Background<f32, [i16; 3], 288, 6>`, default
+/// configuration: 32 buffered samples a step) fed [`BACKGROUND_READINGS`]
+/// readings of the simulator's ordinary use, one `push` and one `step` a
+/// reading, each call timed on its own: the worst `push`, the worst
+/// `step`, a refit's whole cost (the steps from its start to its end;
+/// worst and mean) and the mean per reading. Single calls are timed to a
+/// SysTick tick (40 instructions), after subtracting the empty measurement.
+/// (No `bench_mark`: `bench.sh --verify` checks the other figures.)
+fn background(timer: &Timer) -> bool {
+    use firmware_example::sim::Motion;
+    use mag_cal_core::background::{Background, BackgroundConfig, Stepped};
+    type Calibrator = Background<f32, [i16; 3], 288, 6>;
+    let Some(bg) = cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT))
+    else {
+        return false;
+    };
+    let mut sim = Simulator::new(Scenario::DEFAULT);
+    sim.set_motion(Motion::OrdinaryUse);
+    let ticks = |t0: u64, t1: u64| (t1 - t0).saturating_sub(timer.empty) * INSTRUCTIONS_PER_TICK;
+    let (mut worst_push, mut worst_step, mut total) = (0u64, 0u64, 0u64);
+    let (mut refit, mut worst_refit, mut refit_sum, mut refits) = (0u64, 0u64, 0u64, 0u64);
+    let mut adopted = 0u32;
+    for _ in 0..BACKGROUND_READINGS {
+        let s = sim.next_reading().counts;
+        let t0 = now();
+        black_box(bg.push(black_box(s)));
+        let t1 = now();
+        let step = black_box(bg.step());
+        let t2 = now();
+        let (p, q) = (ticks(t0, t1), ticks(t1, t2));
+        worst_push = worst_push.max(p);
+        worst_step = worst_step.max(q);
+        total += p + q;
+        match step {
+            Stepped::Working => refit += q,
+            Stepped::Adopted | Stepped::Kept | Stepped::Refused(_) => {
+                refit += q;
+                worst_refit = worst_refit.max(refit);
+                refit_sum += refit;
+                refits += 1;
+                refit = 0;
+                adopted += u32::from(step == Stepped::Adopted);
+            }
+            _ => refit = 0,
+        }
+    }
+    let n = BACKGROUND_READINGS as usize;
+    println!(
+        "# background: {=u64} refits ({=u32} adopted), {=usize} buffered at the end",
+        refits,
+        adopted,
+        bg.samples().len()
+    );
+    report("background-push-worst", n, worst_push);
+    report("background-step-worst", n, worst_step);
+    report("background-refit-worst", n, worst_refit);
+    report("background-refit-mean", n, refit_sum / refits.max(1));
+    report("background-per-reading-mean", n, total / BACKGROUND_READINGS);
+    bg.calibration().is_some() && refits > 0
+}
+
+/// Readings of the background benchmark.
+const BACKGROUND_READINGS: u64 = 20_000;
