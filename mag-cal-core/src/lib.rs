@@ -137,7 +137,9 @@
 //! # Around the fit
 //!
 //! [`collector`] gathers samples one at a time on the device, with
-//! coverage and progress; [`offsets`] re-estimates the hard iron alone
+//! coverage and progress; [`background`] calibrates from ordinary use,
+//! without a calibration dance, in slices of bounded work, and follows a
+//! moved hard iron; [`offsets`] re-estimates the hard iron alone
 //! when the soft iron is known, from a part of the sphere; [`planar`]
 //! gives a heading-only calibration to a device that turns about one axis
 //! (a car, a boat), which the three-dimensional fit refuses as planar;
