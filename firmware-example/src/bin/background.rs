@@ -86,7 +86,8 @@ fn main() -> ! {
         READINGS, JUMP_AT, bound, BOUND_IN_NOISE, noise
     );
 
-    let calibrator = cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT));
+    let calibrator =
+        cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT));
     let Some(bg) = calibrator else {
         platform::exit(false)
     };
@@ -119,7 +120,10 @@ fn main() -> ! {
                         e_b
                     );
                 } else {
-                    info!("refit adopted at reading {}: e_M {=f32}, e_b {=f32}", k, e_m, e_b);
+                    info!(
+                        "refit adopted at reading {}: e_M {=f32}, e_b {=f32}",
+                        k, e_m, e_b
+                    );
                 }
             }
             Stepped::OffsetsAdopted => {
@@ -181,7 +185,10 @@ fn main() -> ! {
     }
     match detected {
         Some(d) => {
-            info!("jump detected and offsets re-estimated after {} readings", d);
+            info!(
+                "jump detected and offsets re-estimated after {} readings",
+                d
+            );
             ok &= d <= DETECT_WITHIN;
         }
         None => {
@@ -192,7 +199,10 @@ fn main() -> ! {
     match bg.calibration() {
         Some(cal) => {
             let (e_m, e_b) = errors(cal, &truth);
-            info!("after the recovery (end): e_M {=f32}, e_b {=f32}; {}", e_m, e_b, cal);
+            info!(
+                "after the recovery (end): e_M {=f32}, e_b {=f32}; {}",
+                e_m, e_b, cal
+            );
             ok &= e_m <= bound && e_b <= bound;
         }
         None => ok = false,

@@ -590,7 +590,11 @@ fn background(timer: &Timer) -> bool {
     report("background-step-worst", n, worst_step);
     report("background-refit-worst", n, worst_refit);
     report("background-refit-mean", n, refit_sum / refits.max(1));
-    report("background-per-reading-mean", n, total / BACKGROUND_READINGS);
+    report(
+        "background-per-reading-mean",
+        n,
+        total / BACKGROUND_READINGS,
+    );
     bg.calibration().is_some() && refits > 0
 }
 
