@@ -27,6 +27,14 @@
 //! - [`Table::columns`] says which of these rules picked the columns;
 //! - for `apply`, accelerometer columns are named by `--accel-columns` or
 //!   found in the header by their exact names ([`ACCEL_NAMES`]);
+//! - a MotionCal log (the first content line starts with `Raw:`: the
+//!   serial output of PJRC's and Adafruit's calibration sketches,
+//!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
+//!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
+//!   accelerometer from fields 1-3; its other lines (`Uni:`, `Cal1:`, ...)
+//!   are skipped, and a `Raw:` line that is cut short or garbled (a serial
+//!   line caught mid-way) becomes a non-finite row, which the fit drops and
+//!   counts;
 //! - `nan`, `inf`, `-inf` and overflowing literals such as `1e400` are read
 //!   as non-finite numbers, which the core skips and counts as dropped;
 //!   finite but absurd values such as `1e308` are passed to the core as
@@ -223,7 +231,12 @@ pub enum Picked {
     Named,
     /// Found by name in the header ([`mag_axis`]), without `--columns`.
     Header,
+    /// The magnetometer fields of MotionCal `Raw:` lines.
+    MotionCal,
 }
+
+/// The prefix of a MotionCal raw line.
+pub const MOTIONCAL_PREFIX: &str = "Raw:";
 
 impl fmt::Display for ColumnsUsed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -231,6 +244,7 @@ impl fmt::Display for ColumnsUsed {
             Picked::FirstThree => "the first three fields",
             Picked::Named => "--columns",
             Picked::Header => "from the header",
+            Picked::MotionCal => "MotionCal Raw: lines, fields 7-9 (10 per uT)",
         };
         match &self.names {
             Some(names) => {
@@ -256,6 +270,19 @@ pub fn parse_with_accel(
     let Some((first_no, first)) = lines.next() else {
         return Err(CliError::Input(format!("{source_name}: no data rows")));
     };
+    if first.trim_start().starts_with(MOTIONCAL_PREFIX) {
+        if columns.is_some() {
+            return Err(CliError::Input(format!(
+                "{source_name}: MotionCal Raw: lines have no header: --columns does not apply"
+            )));
+        }
+        if matches!(accel, Accel::Named(_)) {
+            return Err(CliError::Input(format!(
+                "{source_name}: MotionCal Raw: lines have no header: --accel-columns does not apply"
+            )));
+        }
+        return Ok(motioncal(text, accel != Accel::None));
+    }
     let separator = Separator::detect(first);
     let first_fields = separator.fields(first);
     let has_header = first_fields.iter().any(|f| number(f).is_none());
@@ -322,6 +349,45 @@ pub fn parse_with_accel(
         accel: accel_rows,
         columns,
     })
+}
+
+/// The rows of a MotionCal log: every `Raw:` line, the magnetometer from
+/// fields 7-9 and (with `with_accel`) the accelerometer from fields 1-3; a
+/// line without nine numbers is a non-finite row.
+fn motioncal(text: &str, with_accel: bool) -> Table {
+    let mut samples = Vec::new();
+    let mut accel = Vec::new();
+    for (_, line) in content_lines(text) {
+        let Some(rest) = line.trim_start().strip_prefix(MOTIONCAL_PREFIX) else {
+            continue;
+        };
+        let values: Vec<f64> = rest
+            .split(',')
+            .map(|f| {
+                number(f.trim())
+                    .filter(|v| v.is_finite())
+                    .unwrap_or(f64::NAN)
+            })
+            .collect();
+        let whole = values.len() == 9;
+        let triple = |at: usize| {
+            if whole {
+                [values[at], values[at + 1], values[at + 2]]
+            } else {
+                [f64::NAN; 3]
+            }
+        };
+        samples.push(triple(6));
+        accel.push(triple(0));
+    }
+    Table {
+        samples,
+        accel: with_accel.then_some(accel),
+        columns: ColumnsUsed {
+            names: None,
+            picked: Picked::MotionCal,
+        },
+    }
 }
 
 /// The sample columns without `--columns`, when the first data row has

@@ -2056,3 +2056,54 @@ fn planar_refuses_what_is_not_planar_and_bad_options() {
     assert_eq!(run.code, 2);
     assert!(run.stderr.contains("--flags"), "{}", run.stderr);
 }
+
+#[test]
+fn motioncal_raw_lines_are_read() {
+    // The ICM-20948 recording as a MotionCal sketch prints it: Raw: lines
+    // (accelerometer, gyroscope, magnetometer), Uni: lines between them, a
+    // line cut short at the start (the serial port opened mid-line).
+    let text = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
+    let mut log = String::from("Raw:0,0,81\n");
+    for (i, line) in text.lines().enumerate() {
+        log.push_str(&format!("Raw:10,-20,8190,1,2,3,{line}\n"));
+        if i % 50 == 0 {
+            log.push_str("Uni:0.00,0.00,1.00,0.0000,0.0000,0.0000,1.0,2.0,3.0\n");
+        }
+    }
+    let raw = temp_file("motioncal-raw.txt", log.as_bytes());
+    let motioncal = magcal(&["fit", &raw, "--format", "json"], None).json();
+    let plain = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    )
+    .json();
+    // The same calibration as from the plain x,y,z file; the cut line is
+    // dropped and counted.
+    assert_same_calibration(&motioncal, &plain, 1e-12);
+    assert_eq!(motioncal["drops"]["non_finite"], 1, "{motioncal}");
+    let text = magcal(&["fit", &raw], None);
+    assert!(
+        text.stdout.contains("MotionCal Raw: lines"),
+        "{}",
+        text.stdout
+    );
+    // --columns does not apply to a log without a header.
+    let run = magcal(&["fit", &raw, "--columns", "a,b,c"], None);
+    assert_eq!(run.code, 2);
+    assert!(run.stderr.contains("MotionCal"), "{}", run.stderr);
+    // apply reads the accelerometer of the Raw: lines: heading columns.
+    let cal = temp_file(
+        "motioncal-cal.json",
+        magcal(&["fit", &raw, "--format", "json"], None)
+            .stdout
+            .as_bytes(),
+    );
+    let out = magcal(&["apply", &cal, &raw], None);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(
+        out.stdout.starts_with("x,y,z,heading_deg"),
+        "{}",
+        &out.stdout[..80]
+    );
+    assert_eq!(out.stdout.lines().count(), 1 + 301);
+}
