@@ -64,7 +64,7 @@ use crate::moments::{Cut, Moments};
 use crate::normalize::{Normalization, Projector, MIN_SAMPLES};
 use crate::offsets::{refit_offsets, Strength};
 use crate::quality::{self, DirectionSums, Figures, FinalPass, FinalSums};
-use crate::rules::{check, Gate, Rules};
+use crate::rules::{check, Drops, Gate, Rules};
 use crate::sample::Sample;
 use crate::{Calibration, Error, Quality, Real, Thresholds, Warnings};
 
@@ -354,6 +354,9 @@ impl Watch {
 /// [`RECENT`] recent samples and about 1.5 KB of refit state.
 pub struct Background<T: Real, S: Sample, const N: usize, const K: usize> {
     config: BackgroundConfig,
+    /// `(2 sin(min_angle / 2))^2`: the squared chord between unit
+    /// directions [`BackgroundConfig::min_angle_deg`] apart.
+    min_chord_sq: f32,
     store: heapless::Vec<S, N>,
     cell_of: [u8; N],
     /// The reading count when each sample was buffered (wrapping).
@@ -401,8 +404,10 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             slice: config.slice.max(1),
             ..config
         };
+        let chord = 2.0 * libm::sinf(0.5 * config.min_angle_deg.to_radians());
         Self {
             config,
+            min_chord_sq: chord * chord,
             store: heapless::Vec::new(),
             cell_of: [0; N],
             stamp: [0; N],
@@ -447,7 +452,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
     pub fn age(&self) -> Option<u64> {
         self.current
             .as_ref()
-            .map(|_| self.counters.readings - self.adopted_at)
+            .map(|_| self.counters.readings.saturating_sub(self.adopted_at))
     }
 
     /// Whether the calibration in use no longer fits the readings (a
@@ -544,7 +549,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             return Pushed::TooClose;
         };
         if let Some(last) = self.last_direction {
-            if !far_enough(&dir, &last, self.config.min_angle_deg) {
+            if !far_enough(&dir, &last, self.min_chord_sq) {
                 return Pushed::TooClose;
             }
         }
@@ -669,6 +674,23 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         }
     }
 
+    /// Examines at most one slice of buffered samples from `pos`, removing
+    /// those `keep` (given the sample and its stamp) refuses; the position
+    /// to go on from.
+    fn sweep(&mut self, mut pos: usize, keep: impl Fn(&S, u32) -> bool) -> usize {
+        let mut seen = 0;
+        while pos < self.store.len() && seen < self.config.slice {
+            seen += 1;
+            let stamp = self.stamp.get(pos).copied().unwrap_or(0);
+            if self.store.get(pos).is_some_and(|s| keep(s, stamp)) {
+                pos += 1;
+            } else {
+                self.remove(pos);
+            }
+        }
+        pos
+    }
+
     /// Takes `slot` out of the ring of `cell`, keeping the others' order.
     fn unlink(&mut self, cell: usize, slot: usize) {
         let (Some(ring), Some(fill), Some(head)) = (
@@ -697,7 +719,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
     /// from the last one kept.
     fn remember(&mut self, sample: S, dir: [f32; 3]) {
         if let Some(last) = self.recent_direction {
-            if !far_enough(&dir, &last, self.config.min_angle_deg) {
+            if !far_enough(&dir, &last, self.min_chord_sq) {
                 return;
             }
         }
@@ -870,7 +892,13 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                     Ok(ls) => ls,
                     Err(e) => {
                         // Planar data fail the LS fit: say so.
-                        let mut figures = empty_figures(self.store.len());
+                        let mut figures = Figures::before_fit(
+                            self.store.len(),
+                            Drops::default(),
+                            true,
+                            true,
+                            false,
+                        );
                         figures.flatness = Some(flatness);
                         let e = match quality::judge(&figures, &self.config.thresholds) {
                             Err(refusal) => refusal,
@@ -1023,16 +1051,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
             Stage::Age { mut pos } => {
                 let now = self.counters.readings as u32;
-                let mut seen = 0;
-                while pos < self.store.len() && seen < self.config.slice.max(1) {
-                    seen += 1;
-                    let stamp = self.stamp.get(pos).copied().unwrap_or(now);
-                    if now.wrapping_sub(stamp) > self.config.max_age {
-                        self.remove(pos);
-                    } else {
-                        pos += 1;
-                    }
-                }
+                let max_age = self.config.max_age;
+                pos = self.sweep(pos, |_, stamp| now.wrapping_sub(stamp) <= max_age);
                 if pos < self.store.len() {
                     (Stage::Age { pos }, Stepped::Working)
                 } else if self.store.len() >= MIN_SAMPLES
@@ -1053,24 +1073,14 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                     let u = cal.apply(*s);
                     (dot(&u, &u).sqrt() - T::one()).abs() <= limit
                 };
-                let mut seen = 0;
-                while pos < self.store.len() && seen < self.config.slice.max(1) {
-                    seen += 1;
-                    // Kept: rows the new hard iron fits and the old does
-                    // not (taken after the change). Rows both fit are
-                    // biased by up to the limit in the old direction and
-                    // would pull the next refit back.
-                    let keep = self
-                        .store
-                        .get(pos)
-                        .is_some_and(|s| fits(&current.calibration, s) && !fits(&old, s));
-                    if keep {
-                        pos += 1;
-                    } else {
-                        self.remove(pos);
-                        self.counters.purged += 1;
-                    }
-                }
+                // Kept: rows the new hard iron fits and the old does not
+                // (taken after the change). Rows both fit are biased by up
+                // to the limit in the old direction and would pull the next
+                // refit back.
+                let before = self.store.len();
+                pos = self.sweep(pos, |s, _| fits(&current.calibration, s) && !fits(&old, s));
+                let dropped = before - self.store.len();
+                self.counters.purged = self.counters.purged.saturating_add(dropped as u32);
                 if pos < self.store.len() {
                     (Stage::Purge { pos, old }, Stepped::Working)
                 } else {
@@ -1098,7 +1108,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         last: &FinalPass<T>,
     ) -> Result<Current<T>, Error> {
         let distortion = quality::distortion(&est.w)?;
-        let mut figures = empty_figures(self.store.len());
+        let mut figures =
+            Figures::before_fit(self.store.len(), Drops::default(), true, true, false);
         figures.used = Some(last.used);
         figures.flatness = Some(partial.flatness);
         figures.quadric_gap = partial.quadric_gap;
@@ -1210,29 +1221,6 @@ fn cut<T: Real>(sigma: T) -> T {
     larger(sigma, T::lit(MIN_SIGMA)) * T::lit(OUTLIER_CUT)
 }
 
-/// The judging's figures before any is computed (`valid` rows, robust).
-fn empty_figures<T: Real>(valid: usize) -> Figures<T> {
-    Figures {
-        valid,
-        used: None,
-        drops: crate::rules::Drops::default(),
-        robust: true,
-        judge_lack_of_fit: true,
-        low_spread: false,
-        flatness: None,
-        quadric_gap: None,
-        distortion: None,
-        coverage: None,
-        gram_condition: None,
-        radial_rms: None,
-        fit_error: None,
-        lack_of_fit: None,
-        misfit_significant: false,
-        field_deviation: None,
-        step_warnings: Warnings::NONE,
-    }
-}
-
 /// `v / |v|`, or `None` for a zero or non-finite `v`.
 fn unit(v: [f32; 3]) -> Option<[f32; 3]> {
     let r = libm::sqrtf(dot(&v, &v));
@@ -1242,11 +1230,11 @@ fn unit(v: [f32; 3]) -> Option<[f32; 3]> {
     Some([v[0] / r, v[1] / r, v[2] / r])
 }
 
-/// Whether two unit directions differ by at least `deg` (by the chord).
-fn far_enough(a: &[f32; 3], b: &[f32; 3], deg: f32) -> bool {
-    let chord = 2.0 * libm::sinf(0.5 * deg.max(0.0).to_radians());
+/// Whether two unit directions are farther apart than the chord whose
+/// square is `chord_sq`.
+fn far_enough(a: &[f32; 3], b: &[f32; 3], chord_sq: f32) -> bool {
     let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    dot(&d, &d) > chord * chord
+    dot(&d, &d) > chord_sq
 }
 
 #[cfg(test)]

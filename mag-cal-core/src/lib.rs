@@ -750,25 +750,13 @@ impl<T: Real> Figures<T> {
             let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
             scan.norm.scale < T::from_single(config.thresholds.warn_spread_over_noise) * var.sqrt()
         });
-        Self {
-            valid: scan.used,
-            used: None,
-            drops: scan.drops,
+        Self::before_fit(
+            scan.used,
+            scan.drops,
             robust,
-            judge_lack_of_fit: config.method.fits_radial_residual(),
+            config.method.fits_radial_residual(),
             low_spread,
-            flatness: None,
-            quadric_gap: None,
-            distortion: None,
-            coverage: None,
-            gram_condition: None,
-            radial_rms: None,
-            fit_error: None,
-            lack_of_fit: None,
-            misfit_significant: false,
-            field_deviation: None,
-            step_warnings: Warnings::NONE,
-        }
+        )
     }
 }
 

@@ -330,7 +330,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
         rules: screening.rules,
         screen: Some(screening.ball),
     };
-    let mut passes = scanned_passes() + screening.passes;
+    let mut passes = SCAN_PASSES + screening.passes;
     let norm = screening.norm;
     let (c, m, inv_m) = (
         [norm.centre.x, norm.centre.y, norm.centre.z],
@@ -538,9 +538,7 @@ pub fn judge<T: Real>(
 }
 
 /// Passes of the rules' scan (the drop count and the moments).
-const fn scanned_passes() -> u32 {
-    2
-}
+const SCAN_PASSES: u32 = 2;
 
 /// The rows a pass visits, in normalised coordinates `(y - c) / m`.
 struct Rows<'a, T: Real, S: Sample> {

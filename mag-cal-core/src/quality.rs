@@ -237,6 +237,36 @@ pub(crate) struct Figures<T: Real> {
 }
 
 impl<T: Real> Figures<T> {
+    /// The figures before any step computed one: `valid` rows kept by the
+    /// rules, which dropped `drops`.
+    pub(crate) fn before_fit(
+        valid: usize,
+        drops: crate::rules::Drops,
+        robust: bool,
+        judge_lack_of_fit: bool,
+        low_spread: bool,
+    ) -> Self {
+        Self {
+            valid,
+            used: None,
+            drops,
+            robust,
+            judge_lack_of_fit,
+            low_spread,
+            flatness: None,
+            quadric_gap: None,
+            distortion: None,
+            coverage: None,
+            gram_condition: None,
+            radial_rms: None,
+            fit_error: None,
+            lack_of_fit: None,
+            misfit_significant: false,
+            field_deviation: None,
+            step_warnings: Warnings::NONE,
+        }
+    }
+
     /// Whether the lack of fit is judged, significant against the noise,
     /// and beyond its limit.
     pub(crate) fn misfit(&self, th: &Thresholds) -> bool {
