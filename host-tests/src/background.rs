@@ -98,16 +98,9 @@ pub struct Trace {
     pub adopted: Vec<usize>,
     /// Readings at which an offsets-only fit was adopted.
     pub offsets: Vec<usize>,
-    /// Readings at which the calibration turned stale.
-    pub stale: Vec<usize>,
     /// Errors `(e_M, e_b)` of the calibration in use after each reading
     /// (`None` before the first), against the hard iron of that reading.
     pub errors: Vec<Option<(f64, f64)>>,
-    /// Largest number of buffered samples a call of `step` processed is
-    /// the slice; this counts the calls that did work.
-    pub working_calls: usize,
-    /// Refits refused.
-    pub refused: usize,
 }
 
 /// Runs the calibrator over `samples` (one `step` per reading), with the
@@ -119,7 +112,6 @@ pub fn run(
     b: impl Fn(usize) -> Vector3<f64>,
 ) -> Trace {
     let mut trace = Trace::default();
-    let mut was_stale = false;
     for (i, s) in samples.iter().enumerate() {
         bg.push(*s);
         match bg.step() {
@@ -128,14 +120,8 @@ pub fn run(
                 trace.first.get_or_insert(i);
             }
             Stepped::OffsetsAdopted => trace.offsets.push(i),
-            Stepped::Working => trace.working_calls += 1,
-            Stepped::Refused(_) => trace.refused += 1,
             _ => {}
         }
-        if bg.is_stale() && !was_stale {
-            trace.stale.push(i);
-        }
-        was_stale = bg.is_stale();
         let at = Truth {
             t: truth.t,
             b: b(i),

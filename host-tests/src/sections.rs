@@ -66,6 +66,36 @@ pub fn keep_all(new: &str, old: &str) -> String {
     out
 }
 
+/// The command line of a binary that writes one section: no arguments
+/// (print only) or `--write FILE`; for anything else a usage line on
+/// stderr and the exit status of a usage error.
+pub fn write_target(binary: &str) -> Result<Option<String>, std::process::ExitCode> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.as_slice() {
+        [] => Ok(None),
+        [flag, path] if flag == "--write" => Ok(Some(path.clone())),
+        _ => {
+            eprintln!("usage: {binary} [--write FILE]");
+            Err(std::process::ExitCode::from(2))
+        }
+    }
+}
+
+/// Prints `doc` and, with a `target` file, splices it into that file as
+/// section `name` (the file is created when missing); the exit status.
+pub fn publish(doc: &str, name: &str, target: Option<&str>) -> std::process::ExitCode {
+    print!("{doc}");
+    if let Some(path) = target {
+        let old = std::fs::read_to_string(path).unwrap_or_default();
+        if let Err(e) = std::fs::write(path, splice(&old, name, doc)) {
+            eprintln!("writing {path}: {e}");
+            return std::process::ExitCode::from(2);
+        }
+        eprintln!("wrote the section into {path}");
+    }
+    std::process::ExitCode::SUCCESS
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

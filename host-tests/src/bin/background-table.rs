@@ -12,14 +12,9 @@ use host_tests::background::{render, study, CHANGE_AT, MAGNET_READINGS, READINGS
 const SECTION: &str = "background";
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let write = match args.as_slice() {
-        [] => None,
-        [flag, path] if flag == "--write" => Some(path.clone()),
-        _ => {
-            eprintln!("usage: background-table [--write FILE]");
-            return ExitCode::from(2);
-        }
+    let write = match host_tests::sections::write_target("background-table") {
+        Ok(write) => write,
+        Err(usage) => return usage,
     };
     let seeds = 20;
     let table = render(&study(seeds));
@@ -52,14 +47,5 @@ fn main() -> ExitCode {
          stay up to `max_age` = 10 000 readings) settle on a compromise, and the residuals under \
          it rarely rise long enough for the offsets-only fit to take over.\n"
     );
-    print!("{doc}");
-    if let Some(path) = write {
-        let old = std::fs::read_to_string(&path).unwrap_or_default();
-        if let Err(e) = std::fs::write(&path, host_tests::sections::splice(&old, SECTION, &doc)) {
-            eprintln!("writing {path}: {e}");
-            return ExitCode::from(2);
-        }
-        eprintln!("wrote the section into {path}");
-    }
-    ExitCode::SUCCESS
+    host_tests::sections::publish(&doc, SECTION, write.as_deref())
 }

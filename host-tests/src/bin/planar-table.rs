@@ -15,14 +15,9 @@ use mag_cal_core::planar::{calibrate_planar, PlanarConfig};
 const SECTION: &str = "planar";
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let write = match args.as_slice() {
-        [] => None,
-        [flag, path] if flag == "--write" => Some(path.clone()),
-        _ => {
-            eprintln!("usage: planar-table [--write FILE]");
-            return ExitCode::from(2);
-        }
+    let write = match host_tests::sections::write_target("planar-table") {
+        Ok(write) => write,
+        Err(usage) => return usage,
     };
     let seeds = 20;
     let rows = tilt_study(&[0.0, 2.0, 5.0, 10.0], seeds);
@@ -71,14 +66,5 @@ fn main() -> ExitCode {
          them too (its fit error rises with the tilt, and at 10 deg most runs are refused).\n\n{real}\n",
         render(&rows)
     );
-    print!("{doc}");
-    if let Some(path) = write {
-        let old = std::fs::read_to_string(&path).unwrap_or_default();
-        if let Err(e) = std::fs::write(&path, host_tests::sections::splice(&old, SECTION, &doc)) {
-            eprintln!("writing {path}: {e}");
-            return ExitCode::from(2);
-        }
-        eprintln!("wrote the section into {path}");
-    }
-    ExitCode::SUCCESS
+    host_tests::sections::publish(&doc, SECTION, write.as_deref())
 }
