@@ -1,7 +1,6 @@
 //! The `fit` subcommand: read, parse, calibrate (timed), report.
 
 use std::io::Write;
-use std::time::Instant;
 
 use mag_cal_core::{calibrate, Calibration, Config, Method, Real, SampleClass};
 use nalgebra::{Matrix3, Vector3};
@@ -165,15 +164,31 @@ impl Outcome {
     }
 }
 
-/// Calibrates `samples` in the requested precision.
+/// Calibrates `samples` in the requested precision, timed by the system's
+/// monotonic clock.
 pub fn fit(
     samples: &[[f64; 3]],
     config: &Config,
     precision: Precision,
 ) -> Result<Outcome, CliError> {
+    let start = std::time::Instant::now();
+    fit_timed(samples, config, precision, &|| {
+        start.elapsed().as_secs_f64() * 1e6
+    })
+}
+
+/// [`fit`] with the clock given: `now_us` reads a monotonic clock in
+/// microseconds (the page passes the browser's `performance.now()`, as
+/// `wasm32-unknown-unknown` has no `std::time::Instant`).
+pub fn fit_timed(
+    samples: &[[f64; 3]],
+    config: &Config,
+    precision: Precision,
+    now_us: &dyn Fn() -> f64,
+) -> Result<Outcome, CliError> {
     match precision {
-        Precision::F32 => fit_in::<f32>(samples, config, precision),
-        Precision::F64 => fit_in::<f64>(samples, config, precision),
+        Precision::F32 => fit_in::<f32>(samples, config, precision, now_us),
+        Precision::F64 => fit_in::<f64>(samples, config, precision, now_us),
     }
 }
 
@@ -183,16 +198,17 @@ fn fit_in<T: Real>(
     samples: &[[f64; 3]],
     config: &Config,
     precision: Precision,
+    now_us: &dyn Fn() -> f64,
 ) -> Result<Outcome, CliError> {
     // Integer counts of an i16 sensor are calibrated as such, so that the
     // rails rule sees them (`counts`).
     let ints = counts(samples);
-    let start = Instant::now();
+    let start = now_us();
     let fit = match &ints {
         Some(ints) => calibrate::<T, [i16; 3]>(ints, config),
         None => calibrate::<T, [f64; 3]>(samples, config),
     };
-    let elapsed = start.elapsed();
+    let elapsed_us = now_us() - start;
     let fit = fit?;
 
     let cal = &fit.calibration;
@@ -226,7 +242,7 @@ fn fit_in<T: Real>(
         iterations: report.iterations,
         passes: report.passes,
         robust_passes: report.robust_passes,
-        timing_us: elapsed.as_secs_f64() * 1e6,
+        timing_us: elapsed_us,
         quality: Quality {
             radial_rms: report.radial_rms.to_f64(),
             norm_spread: spread(norms),

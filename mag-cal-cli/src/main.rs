@@ -1,46 +1,13 @@
-//! `magcal`: calibrate recorded magnetometer logs with [`mag_cal_core`].
-//!
-//! The binary has no numerics of its own: it parses the command line and
-//! the input file, calls [`mag_cal_core::calibrate`] (or rebuilds a
-//! calibration and applies it), and formats the result.
-//!
-//! | module | what |
-//! |---|---|
-//! | [`cli`] | the command line: subcommands, options, name-to-method mapping |
-//! | [`input`] | reading a file or stdin and parsing it into samples |
-//! | [`fit`] | the `fit` subcommand: one call to the core, timed |
-//! | [`output`] | the text (for people) and JSON (for programs) reports |
-//! | [`svg`] | `fit --plot`: the samples before and after, as SVG |
-//! | [`selection`] | which rows a fit used: drop counts, the JSON `selection`, row classes |
-//! | [`apply`] | the `apply` subcommand: calibrated samples, headings and row flags as CSV |
-//! | [`error`] | the error type and its exit codes |
-//!
-//! Exit codes: 0 success, 2 usage, I/O or parse error, 3 calibration refused
-//! by the core. Every failure prints one line on stderr naming the reason
-//! (clap's usage errors start with such a line and add a usage hint). A
-//! success prints nothing on stderr, except `magcal: note: ...` lines: one
-//! `columns ...` when the sample columns were found in the header and the
-//! output does not say so (`fit --format json`, `apply`), and one for
-//! `apply --flags` with a calibration file that has no `selection`.
-
-mod apply;
-mod cli;
-mod error;
-mod fit;
-mod input;
-mod offsets;
-mod output;
-mod planar;
-mod selection;
-mod svg;
+//! `magcal`: the command line over the [`mag_cal_cli`] library.
 
 use std::io::Write;
 use std::process::ExitCode;
 
 use clap::Parser;
 
-use crate::cli::{Cli, Command};
-use crate::error::CliError;
+use mag_cal_cli::cli::{Cli, Command};
+use mag_cal_cli::error::{self, CliError};
+use mag_cal_cli::{apply, fit, offsets, planar};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {

@@ -241,6 +241,13 @@ pub struct Progress {
     pub cells_visited: usize,
     /// Number of cells, [`CELLS`].
     pub cells: usize,
+    /// The visited cells as bits: bit `c` is set when cell `c` holds a
+    /// stored sample (`cells_visited` is its count of ones). Cell
+    /// `c = band * SECTORS + sector`: band `floor(3 (z + 1))` of the unit
+    /// direction `(x, y, z)` from the centre (six bands of equal area, `z`
+    /// from -1 up), sector the octant of its longitude `atan2(y, x)` from
+    /// 0 deg counter-clockwise. For a display of the coverage.
+    pub visited: u64,
     /// Progress towards [`Progress::ready`], `0..=100`: the smaller of the
     /// cell fraction `cells_visited / READY_CELLS` and the sample fraction
     /// `samples / min(READY_SAMPLES, N)`, rounded down. It is 100 exactly
@@ -470,6 +477,7 @@ pub(crate) fn cell(v: [f32; 3]) -> Option<usize> {
 /// }
 /// let p = collector.progress();
 /// assert!(p.ready && p.percent == 100 && p.cells_visited >= 36);
+/// assert_eq!(p.visited.count_ones() as usize, p.cells_visited);
 /// let fit = calibrate::<f32, _>(collector.samples(), &Config::default())?;
 /// assert!((fit.calibration.hard_iron()[0] - 250.0).abs() < 1.0);
 /// # Ok::<(), mag_cal_core::Error>(())
@@ -633,7 +641,7 @@ impl<S: Sample, const N: usize> Collector<S, N> {
     /// let c: Collector<[i16; 3], 300> = Collector::default();
     /// let p = c.progress();
     /// assert_eq!((p.samples, p.cells_visited, p.cells), (0, 0, CELLS));
-    /// assert_eq!((p.percent, p.ready), (0, false));
+    /// assert_eq!((p.percent, p.ready, p.visited), (0, false, 0));
     /// ```
     pub fn progress(&self) -> Progress {
         let mut visited = [false; CELLS];
@@ -647,6 +655,10 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             }
         }
         let cells_visited = visited.iter().filter(|&&v| v).count();
+        let mask = visited
+            .iter()
+            .enumerate()
+            .fold(0u64, |m, (c, &v)| m | (u64::from(v) << (c % 64)));
         let samples = self.samples.len();
         let required = READY_SAMPLES.min(N);
         // A capacity of zero never gets a sample, and never gets ready
@@ -660,6 +672,7 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             samples,
             cells_visited,
             cells: CELLS,
+            visited: mask,
             percent,
             ready: samples >= required && cells_visited >= READY_CELLS,
         }

@@ -11,6 +11,8 @@
 //! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
+//! | `web` | setup, then build the calibration page (`mag-cal-web`: the wasm, `npm ci`, the page assembled in `target/web`) and serve it on `http://127.0.0.1:8080/` (or the port given) |
+//! | `web-test` | setup, then build the page and run its browser tests (`mag-cal-web/tests`, Playwright driving Debian's `chromium`) |
 //!
 //! Each step prints what it runs; the first failing step ends the run with
 //! its exit status.
@@ -43,8 +45,10 @@ fn main() {
         Some("c") => setup().and_then(|()| c_tests()),
         Some("c-footprint") => setup().and_then(|()| c_footprint()),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
+        Some("web") => setup().and_then(|()| web(&args[1..])),
+        Some("web-test") => setup().and_then(|()| web_tests()),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|bench [--verify] [--host]>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|bench [--verify] [--host]|web [PORT]|web-test>");
             exit(2);
         }
     };
@@ -112,7 +116,16 @@ fn setup() -> Result<(), String> {
     run(&root, "rustup", &["toolchain", "install"])?;
     // A toolchain of that channel installed earlier without the target
     // (seen: `toolchain install` then leaves it out); a no-op when present.
-    run(&root, "rustup", &["target", "add", "thumbv7em-none-eabihf"])?;
+    run(
+        &root,
+        "rustup",
+        &[
+            "target",
+            "add",
+            "thumbv7em-none-eabihf",
+            "wasm32-unknown-unknown",
+        ],
+    )?;
     // Debian packages: QEMU's ARM system emulator, and the Arm GNU
     // toolchain with newlib for the C API's Cortex-M4F build.
     let mut packages = Vec::new();
@@ -121,6 +134,14 @@ fn setup() -> Result<(), String> {
     }
     if !on_path("arm-none-eabi-gcc") {
         packages.extend(["gcc-arm-none-eabi", "libnewlib-arm-none-eabi"]);
+    }
+    // The page's browser tests: Debian's Chromium (never a downloaded
+    // browser), and Node.js with npm for playwright-core and three.js.
+    if !Path::new(CHROMIUM).exists() {
+        packages.push("chromium");
+    }
+    if !on_path("npm") {
+        packages.extend(["nodejs", "npm"]);
     }
     if !packages.is_empty() {
         if !on_path("apt-get") {
@@ -239,9 +260,101 @@ fn test_all() -> Result<(), String> {
     qemu_faults()?;
     // The link proof that no panic path is reachable from the core's API
     // (docs/robustness.md).
+    web_tests()?;
     let proof = root().join("no-panic-check").join("check.sh");
     let proof = proof.to_str().ok_or("check.sh: path is not UTF-8")?;
     run(&root(), "bash", &[proof, "--no-list"])
+}
+
+/// Debian's Chromium, which the page's tests drive.
+const CHROMIUM: &str = "/usr/bin/chromium";
+
+/// Builds the page into `target/web`: the wasm (profile `web`), three.js
+/// from `npm ci`, and the page's own files. Returns that folder.
+fn web_build() -> Result<PathBuf, String> {
+    let root = root();
+    let web = root.join("mag-cal-web");
+    run(&web, "npm", &["ci", "--no-audit", "--no-fund"])?;
+    run(
+        &root,
+        "cargo",
+        &[
+            "build",
+            "-p",
+            "mag-cal-web",
+            "--target",
+            "wasm32-unknown-unknown",
+            "--profile",
+            "web",
+            "--locked",
+        ],
+    )?;
+    let out = root.join("target").join("web");
+    let _ = std::fs::remove_dir_all(&out);
+    let three = web.join("node_modules").join("three");
+    let copies = [
+        (
+            root.join("target/wasm32-unknown-unknown/web/mag_cal_web.wasm"),
+            out.join("mag_cal_web.wasm"),
+        ),
+        (
+            three.join("build/three.module.js"),
+            out.join("vendor/three.module.js"),
+        ),
+        (
+            three.join("build/three.core.js"),
+            out.join("vendor/three.core.js"),
+        ),
+        (
+            three.join("examples/jsm/controls/OrbitControls.js"),
+            out.join("vendor/addons/controls/OrbitControls.js"),
+        ),
+        (three.join("LICENSE"), out.join("vendor/THREE-LICENSE")),
+    ];
+    let www = std::fs::read_dir(web.join("www")).map_err(|e| format!("mag-cal-web/www: {e}"))?;
+    let pages = www
+        .filter_map(Result::ok)
+        .map(|e| (e.path(), out.join(e.file_name())));
+    for (from, to) in copies.into_iter().chain(pages) {
+        if let Some(dir) = to.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
+        std::fs::copy(&from, &to).map_err(|e| format!("{}: {e}", from.display()))?;
+    }
+    println!("page built in {}", out.display());
+    Ok(out)
+}
+
+/// Builds the page and serves it (until Ctrl-C).
+fn web(args: &[String]) -> Result<(), String> {
+    let out = web_build()?;
+    let port = args.first().map_or("8080", String::as_str);
+    let serve = root().join("mag-cal-web").join("serve.mjs");
+    run(&root(), "node", &[path_str(&serve)?, path_str(&out)?, port])
+}
+
+/// The page's browser tests: headless Debian Chromium driven by
+/// playwright-core against the page served on localhost, with `magcal` as
+/// the reference for the numbers.
+fn web_tests() -> Result<(), String> {
+    let out = web_build()?;
+    let root = root();
+    run(&root, "cargo", &["build", "-p", "mag-cal-cli", "--locked"])?;
+    let magcal = root.join("target").join("debug").join("magcal");
+    let shared = root.join("..").join("shared").join("data").join("real");
+    let shots = root.join("target").join("web-screenshots");
+    run_with(
+        &root.join("mag-cal-web"),
+        "node",
+        &["--test", "--test-concurrency=1", "tests/"],
+        &[
+            ("WEB_ROOT", path_str(&out)?),
+            ("MAGCAL", path_str(&magcal)?),
+            ("REAL_DATA", path_str(&shared)?),
+            ("CHROMIUM", CHROMIUM),
+            ("SCREENSHOTS", path_str(&shots)?),
+        ],
+    )
 }
 
 /// The core's examples, as a user runs them (the log is a shared real

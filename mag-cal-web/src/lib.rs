@@ -1,0 +1,539 @@
+//! The calibration page's WebAssembly: [`mag_cal_core`] with `magcal`'s
+//! parser, fit summary and reports ([`mag_cal_cli`]) behind a handful of
+//! plain exports, so that the page shows exactly what `magcal fit` prints
+//! and does no numerics of its own.
+//!
+//! # The interface
+//!
+//! Built for `wasm32-unknown-unknown` as a `cdylib`, without generated
+//! glue. Every call that returns data writes one JSON document into an
+//! output buffer, read by the page with [`mc_out_ptr`] and [`mc_out_len`].
+//! Inputs are bytes the page writes into memory it got from [`mc_alloc`]
+//! (and gives back with [`mc_free`]). The one import is
+//! `env.now_us() -> f64`, a monotonic clock in microseconds
+//! (`performance.now() * 1000`), which times the fit as the CLI does.
+//!
+//! | export | does | JSON written |
+//! |---|---|---|
+//! | [`mc_fit`] | parses a file and fits it | [`fit_json`] |
+//! | [`mc_live_reset`] | empties the live collector | none |
+//! | [`mc_live_line`] | one line of a serial stream into the collector | [`Live::line`] |
+//! | [`mc_live_fit`] | fits the collector's samples | [`fit_json`] |
+//!
+//! On the host the same functions are plain Rust ([`fit_json`], [`Live`]),
+//! which the unit tests call.
+
+pub mod packet;
+pub mod snippets;
+
+use std::cell::RefCell;
+
+use mag_cal_cli::cli::{Columns, Precision};
+use mag_cal_cli::error::CliError;
+use mag_cal_cli::fit::{fit_timed, Outcome};
+use mag_cal_cli::input;
+use mag_cal_cli::output;
+use mag_cal_cli::selection::class_name;
+use mag_cal_core::collector::{Collector, Offer, Progress};
+use mag_cal_core::{Config, Method, SampleClass, Warning};
+use serde_json::{json, Value};
+
+/// Capacity of the live collector: MotionCal keeps 650 points; 1000 at
+/// the default 4 deg spacing leaves room for a slow, thorough turn.
+pub const LIVE_CAPACITY: usize = 1000;
+
+/// The options of a fit, as the page sends them (JSON object; every field
+/// optional).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// The name of the file, for messages (`"name"`).
+    pub name: String,
+    /// `"f32"` or `"f64"` (`"precision"`, default `f64`).
+    pub precision: Precision,
+    /// Outlier handling off (`"plain": true`), as `magcal fit --plain`.
+    pub plain: bool,
+    /// Method name (`"method"`, default `adc2`), as `magcal fit --method`.
+    pub method: Method,
+    /// Column names (`"columns": "x,y,z"`), as `magcal fit --columns`.
+    pub columns: Option<Columns>,
+}
+
+impl Options {
+    /// Reads the options from the page's JSON; a bad value is an input
+    /// error naming it.
+    pub fn from_json(text: &[u8]) -> Result<Self, CliError> {
+        let bad = |what: &str| CliError::Input(format!("page options: {what}"));
+        let value: Value = if text.is_empty() {
+            json!({})
+        } else {
+            serde_json::from_slice(text).map_err(|e| bad(&e.to_string()))?
+        };
+        let name = value["name"].as_str().unwrap_or("<page>").to_owned();
+        let precision = match value["precision"].as_str().unwrap_or("f64") {
+            "f64" => Precision::F64,
+            "f32" => Precision::F32,
+            other => return Err(bad(&format!("precision {other:?} is not f32 or f64"))),
+        };
+        let method_name = value["method"].as_str().unwrap_or("adc2");
+        let method = Method::ALL
+            .into_iter()
+            .find(|m| m.name() == method_name)
+            .ok_or_else(|| bad(&format!("no method {method_name:?}")))?;
+        let columns = match value["columns"].as_str() {
+            None | Some("") => None,
+            Some(text) => {
+                let names: Vec<String> = text.split(',').map(|s| s.trim().to_owned()).collect();
+                match <[String; 3]>::try_from(names) {
+                    Ok(names) if names.iter().all(|n| !n.is_empty()) => Some(Columns(names)),
+                    _ => return Err(bad("columns: expected three names, e.g. magx,magy,magz")),
+                }
+            }
+        };
+        Ok(Options {
+            name,
+            precision,
+            plain: value["plain"].as_bool().unwrap_or(false),
+            method,
+            columns,
+        })
+    }
+
+    /// The core's configuration for these options.
+    fn config(&self) -> Config {
+        Config {
+            method: self.method,
+            robust: !self.plain,
+            ..Config::default()
+        }
+    }
+}
+
+/// Parses `bytes` (any format `magcal fit` reads) and fits them; the JSON
+/// for the page and the exit code `magcal fit` would give (0, 2 or 3).
+///
+/// The JSON: `status` (`"ok"`, `"refused"` or `"error"`), `code`, and
+/// - when the file parsed: `columns` (which columns, and why), `rows`, and
+///   `raw` (every row, `null` for a non-finite value);
+/// - on success: `json` (the line `magcal fit --format json` prints, to
+///   save for `magcal apply`), `text` (its text report), `fit` (that JSON
+///   as an object), per row `classes`, `calibrated` (`W (y - b)`) and
+///   `norms`, `warnings` (`name` and the core's sentence, `text`),
+///   `snippets` (`c`, `rust`) and `packet` (MotionCal's 68 bytes);
+/// - otherwise `message`: the CLI's error line, without `magcal: `.
+pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32, String) {
+    let result = Options::from_json(options).and_then(|o| {
+        let table = input::parse(bytes, o.columns.as_ref(), &o.name)?;
+        Ok((o, table))
+    });
+    let (options, table) = match result {
+        Ok(parsed) => parsed,
+        Err(err) => return failure(&err, json!({})),
+    };
+    let mut doc = json!({
+        "columns": table.columns.to_string(),
+        "rows": table.samples.len(),
+        "raw": table.samples,
+    });
+    let samples = &table.samples;
+    match fit_timed(samples, &options.config(), options.precision, now_us) {
+        Ok(o) => {
+            let columns = table.columns.to_string();
+            success(&o, samples, &options.name, &columns, doc)
+        }
+        Err(err) => {
+            doc["rows"] = json!(samples.len());
+            failure(&err, doc)
+        }
+    }
+}
+
+/// The JSON of a refused or failed fit, and its exit code.
+fn failure(err: &CliError, mut doc: Value) -> (u32, String) {
+    let code = u32::try_from(err.exit_code()).unwrap_or(2);
+    doc["status"] = json!(if matches!(err, CliError::Refused(_)) {
+        "refused"
+    } else {
+        "error"
+    });
+    doc["code"] = json!(code);
+    doc["message"] = json!(err.to_string());
+    (code, doc.to_string())
+}
+
+/// The JSON of a successful fit.
+fn success(
+    o: &Outcome,
+    samples: &[[f64; 3]],
+    name: &str,
+    columns: &str,
+    mut doc: Value,
+) -> (u32, String) {
+    let line = output::json(o);
+    let (calibrated, norms): (Vec<Value>, Vec<Value>) = match o.calibration() {
+        Ok(cal) => samples
+            .iter()
+            .map(|s| {
+                let v = cal.apply_vector(*s);
+                (json!([v.x, v.y, v.z]), json!(v.norm()))
+            })
+            .unzip(),
+        Err(err) => return failure(&err, doc),
+    };
+    doc["status"] = json!("ok");
+    doc["code"] = json!(0);
+    doc["fit"] = serde_json::from_str(&line).unwrap_or(Value::Null);
+    doc["json"] = json!(line);
+    doc["text"] = json!(output::text(o, name, columns));
+    doc["classes"] = o
+        .classes
+        .iter()
+        .map(|c: &SampleClass| json!(class_name(*c)))
+        .collect();
+    doc["calibrated"] = Value::Array(calibrated);
+    doc["norms"] = Value::Array(norms);
+    // The core's sentence for each warning the fit reported.
+    doc["warnings"] = o
+        .quality
+        .warnings
+        .iter()
+        .filter_map(|name| Warning::ALL.into_iter().find(|w| w.name() == *name))
+        .map(|w| json!({ "name": w.name(), "text": w.to_string() }))
+        .collect();
+    doc["snippets"] = json!({ "c": snippets::c(o), "rust": snippets::rust(o) });
+    doc["packet"] = json!(packet::from_outcome(o).to_vec());
+    (0, doc.to_string())
+}
+
+/// A live collection from a serial stream of MotionCal lines.
+#[derive(Default)]
+pub struct Live {
+    collector: Collector<[f64; 3], LIVE_CAPACITY>,
+    /// `Raw:` lines read.
+    lines: usize,
+    /// Other lines skipped (`Uni:`, `Cal1:`, a sketch's banner, ...).
+    skipped: usize,
+}
+
+impl Live {
+    /// Reads one line of the stream: a `Raw:` line's magnetometer (fields
+    /// 7-9, by `magcal`'s parser) is offered to the core's collector. The
+    /// JSON: `kind` (`"raw"` or `"skipped"`), for a `Raw:` line `sample`
+    /// (`null` values when cut short) and `offer` (the collector's answer:
+    /// `accepted`, `too_close`, `not_finite`, `full`, `glitch`,
+    /// `outlier`), and always `progress` ([`Live::progress_json`]).
+    pub fn line(&mut self, line: &[u8]) -> String {
+        let text = String::from_utf8_lossy(line);
+        let text = text.trim();
+        let mut doc = if text.starts_with("Raw:") {
+            self.lines += 1;
+            let sample = input::parse(text.as_bytes(), None, "serial")
+                .ok()
+                .and_then(|t| t.samples.first().copied())
+                .unwrap_or([f64::NAN; 3]);
+            let offer = self.collector.offer(sample);
+            json!({ "kind": "raw", "sample": sample, "offer": offer_name(offer) })
+        } else {
+            self.skipped += 1;
+            json!({ "kind": "skipped" })
+        };
+        doc["progress"] = self.progress_json();
+        doc.to_string()
+    }
+
+    /// The collector's progress: `samples`, `cells_visited`, `cells`,
+    /// `percent`, `ready`, `visited` (one flag per cell, cell
+    /// `band * 8 + sector`: six bands of equal area from the south pole,
+    /// eight sectors of longitude from +x counter-clockwise), and the
+    /// stream's `lines` and `skipped`.
+    pub fn progress_json(&self) -> Value {
+        let p: Progress = self.collector.progress();
+        let visited: Vec<bool> = (0..p.cells).map(|c| (p.visited >> c) & 1 == 1).collect();
+        json!({
+            "samples": p.samples,
+            "cells_visited": p.cells_visited,
+            "cells": p.cells,
+            "percent": p.percent,
+            "ready": p.ready,
+            "visited": visited,
+            "lines": self.lines,
+            "skipped": self.skipped,
+        })
+    }
+
+    /// Fits the collected samples, as [`fit_json`] fits a file.
+    pub fn fit(&self, options: &[u8], now_us: &dyn Fn() -> f64) -> (u32, String) {
+        let options = match Options::from_json(options) {
+            Ok(o) => o,
+            Err(err) => return failure(&err, json!({})),
+        };
+        let samples = self.collector.samples();
+        let mut doc = json!({
+            "columns": "Raw: fields 7-9 (MotionCal)",
+            "rows": samples.len(),
+            "raw": samples,
+        });
+        match fit_timed(samples, &options.config(), options.precision, now_us) {
+            Ok(o) => success(
+                &o,
+                samples,
+                &options.name,
+                "Raw: fields 7-9 (MotionCal)",
+                doc,
+            ),
+            Err(err) => {
+                doc["progress"] = self.progress_json();
+                failure(&err, doc)
+            }
+        }
+    }
+}
+
+/// The name of a collector's answer.
+fn offer_name(offer: Offer) -> &'static str {
+    match offer {
+        Offer::Accepted => "accepted",
+        Offer::TooClose => "too_close",
+        Offer::NotFinite => "not_finite",
+        Offer::Full => "full",
+        Offer::Glitch => "glitch",
+        Offer::Outlier => "outlier",
+        _ => "refused",
+    }
+}
+
+// ---- the WebAssembly exports ----------------------------------------------
+
+thread_local! {
+    /// The last JSON document written.
+    static OUT: RefCell<String> = const { RefCell::new(String::new()) };
+    /// The live collection (boxed: 24 KB of samples).
+    static LIVE: RefCell<Box<Live>> = RefCell::new(Box::default());
+}
+
+/// Stores `text` as the output.
+fn set_out(text: String) {
+    OUT.with(|o| *o.borrow_mut() = text);
+}
+
+#[cfg(target_arch = "wasm32")]
+mod clock {
+    #[link(wasm_import_module = "env")]
+    extern "C" {
+        /// `performance.now() * 1000`, from the page.
+        fn now_us() -> f64;
+    }
+
+    /// The page's monotonic clock, microseconds.
+    pub fn now() -> f64 {
+        // SAFETY: an import without arguments or memory access.
+        unsafe { now_us() }
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+mod clock {
+    use std::sync::OnceLock;
+    use std::time::Instant;
+
+    /// A monotonic clock, microseconds since its first reading.
+    pub fn now() -> f64 {
+        static START: OnceLock<Instant> = OnceLock::new();
+        START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e6
+    }
+}
+
+/// The bytes at `ptr` (from [`mc_alloc`]), empty for a null pointer.
+///
+/// # Safety
+/// `ptr` must be null or point to `len` initialised bytes.
+unsafe fn bytes<'a>(ptr: *const u8, len: usize) -> &'a [u8] {
+    if ptr.is_null() || len == 0 {
+        &[]
+    } else {
+        // SAFETY: per the function's contract.
+        unsafe { std::slice::from_raw_parts(ptr, len) }
+    }
+}
+
+/// Allocates `len` bytes for the page to write an input into.
+#[no_mangle]
+pub extern "C" fn mc_alloc(len: usize) -> *mut u8 {
+    let mut buf = std::mem::ManuallyDrop::new(Vec::<u8>::with_capacity(len.max(1)));
+    buf.as_mut_ptr()
+}
+
+/// Frees memory from [`mc_alloc`].
+///
+/// # Safety
+/// `ptr` and `len` must be a pointer [`mc_alloc`] returned and the length
+/// it was called with, not freed before.
+#[no_mangle]
+pub unsafe extern "C" fn mc_free(ptr: *mut u8, len: usize) {
+    if !ptr.is_null() {
+        // SAFETY: per the function's contract (capacity len.max(1)).
+        drop(unsafe { Vec::from_raw_parts(ptr, 0, len.max(1)) });
+    }
+}
+
+/// The output JSON's address.
+#[no_mangle]
+pub extern "C" fn mc_out_ptr() -> *const u8 {
+    OUT.with(|o| o.borrow().as_ptr())
+}
+
+/// The output JSON's length in bytes.
+#[no_mangle]
+pub extern "C" fn mc_out_len() -> usize {
+    OUT.with(|o| o.borrow().len())
+}
+
+/// Fits the file at `data` with the options at `options` ([`fit_json`]);
+/// returns the exit code `magcal fit` would give.
+///
+/// # Safety
+/// Both pointers must be null or point to their lengths of bytes.
+#[no_mangle]
+pub unsafe extern "C" fn mc_fit(
+    data: *const u8,
+    data_len: usize,
+    options: *const u8,
+    options_len: usize,
+) -> u32 {
+    // SAFETY: per the function's contract.
+    let (data, options) = unsafe { (bytes(data, data_len), bytes(options, options_len)) };
+    let (code, text) = fit_json(data, options, &clock::now);
+    set_out(text);
+    code
+}
+
+/// Empties the live collection.
+#[no_mangle]
+pub extern "C" fn mc_live_reset() {
+    LIVE.with(|l| **l.borrow_mut() = Live::default());
+}
+
+/// One line of the serial stream ([`Live::line`]).
+///
+/// # Safety
+/// `line` must be null or point to `len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn mc_live_line(line: *const u8, len: usize) {
+    // SAFETY: per the function's contract.
+    let line = unsafe { bytes(line, len) };
+    let text = LIVE.with(|l| l.borrow_mut().line(line));
+    set_out(text);
+}
+
+/// Fits the collected samples ([`Live::fit`]); returns the exit code.
+///
+/// # Safety
+/// `options` must be null or point to `len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn mc_live_fit(options: *const u8, len: usize) -> u32 {
+    // SAFETY: per the function's contract.
+    let options = unsafe { bytes(options, len) };
+    let (code, text) = LIVE.with(|l| l.borrow().fit(options, &clock::now));
+    set_out(text);
+    code
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points on a shifted, stretched ellipsoid (a Fibonacci sphere), as
+    /// MotionCal's integer `Raw:` units.
+    fn ellipsoid(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = i as f64 * 2.399_963;
+                [
+                    (120.0 + 400.0 * r * phi.cos()).round(),
+                    (-80.0 + 460.0 * r * phi.sin()).round(),
+                    (35.0 + 430.0 * z).round(),
+                ]
+            })
+            .collect()
+    }
+
+    fn csv(rows: &[[f64; 3]]) -> Vec<u8> {
+        rows.iter()
+            .map(|r| format!("{},{},{}\n", r[0], r[1], r[2]))
+            .collect::<String>()
+            .into_bytes()
+    }
+
+    #[test]
+    fn a_file_fits_as_the_cli_fits_it() {
+        let data = csv(&ellipsoid(400));
+        let (code, text) = fit_json(&data, br#"{"name":"e.csv"}"#, &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(doc["status"], "ok");
+        let table = input::parse(&data, None, "e.csv").unwrap();
+        let cli =
+            mag_cal_cli::fit::fit(&table.samples, &Config::default(), Precision::F64).unwrap();
+        assert_eq!(doc["fit"]["hard_iron"], json!(cli.hard_iron));
+        assert_eq!(doc["fit"]["soft_iron"], json!(cli.soft_iron));
+        assert_eq!(doc["norms"].as_array().unwrap().len(), 400);
+        let packet = doc["packet"].as_array().unwrap();
+        assert_eq!(packet.len(), packet::LEN);
+        assert!(doc["snippets"]["c"]
+            .as_str()
+            .unwrap()
+            .contains("magcal_apply"));
+    }
+
+    #[test]
+    fn a_refusal_and_a_parse_error_say_why() {
+        let flat: Vec<[f64; 3]> = ellipsoid(400)
+            .into_iter()
+            .map(|r| [r[0], r[1], 7.0])
+            .collect();
+        let (code, text) = fit_json(&csv(&flat), b"", &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            (code, doc["status"].as_str()),
+            (3, Some("refused")),
+            "{text}"
+        );
+        assert!(doc["message"].as_str().unwrap().contains("plane"), "{text}");
+        assert_eq!(doc["raw"].as_array().unwrap().len(), 400);
+
+        let (code, text) = fit_json(b"a,b,c,d\n1,2,3,4\n", b"", &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((code, doc["status"].as_str()), (2, Some("error")), "{text}");
+        let (code, _) = fit_json(b"1,2,3\n", br#"{"precision":"f16"}"#, &|| 0.0);
+        assert_eq!(code, 2);
+    }
+
+    #[test]
+    fn a_live_stream_collects_and_fits() {
+        let mut live = Live::default();
+        let banner: Value =
+            serde_json::from_str(&live.line(b"Adafruit sensor calibration")).unwrap();
+        assert_eq!(banner["kind"], "skipped");
+        let cut: Value = serde_json::from_str(&live.line(b"Raw:1,2,3,4,5,6,7")).unwrap();
+        assert_eq!(cut["offer"], "not_finite");
+        for r in ellipsoid(800) {
+            let line = format!("Raw:0,0,0,0,0,0,{},{},{}\r", r[0], r[1], r[2]);
+            let _ = live.line(line.as_bytes());
+        }
+        let p = live.progress_json();
+        assert_eq!(p["ready"], true, "{p}");
+        assert_eq!(
+            (p["lines"].as_u64(), p["skipped"].as_u64()),
+            (Some(801), Some(1))
+        );
+        let visited = p["visited"].as_array().unwrap();
+        let seen = visited.iter().filter(|v| v.as_bool() == Some(true)).count();
+        assert_eq!(Some(seen as u64), p["cells_visited"].as_u64());
+        let (code, text) = live.fit(b"", &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        let b = doc["fit"]["hard_iron"][0].as_f64().unwrap();
+        assert!((b - 120.0).abs() < 1.0, "{b}");
+    }
+}

@@ -1,0 +1,321 @@
+// Browser tests of the calibration page: headless Debian Chromium driven by
+// playwright-core, against the built page served on localhost. The
+// reference for every number is `magcal` itself, run on the same input.
+//
+// Environment (set by `cargo xtask web-test`): WEB_ROOT (the built page),
+// MAGCAL (the CLI binary), REAL_DATA (../shared/data/real), CHROMIUM
+// (/usr/bin/chromium), SCREENSHOTS (a folder for the screenshots).
+
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { execFileSync, spawnSync } from 'node:child_process';
+import { mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { chromium } from 'playwright-core';
+import { serve } from '../serve.mjs';
+
+const env = (name) => {
+  const value = process.env[name];
+  if (!value) throw new Error(`${name} is not set: run the tests with 'cargo xtask web-test'`);
+  return value;
+};
+const WEB_ROOT = env('WEB_ROOT');
+const MAGCAL = env('MAGCAL');
+const REAL = env('REAL_DATA');
+const SHOTS = env('SCREENSHOTS');
+mkdirSync(SHOTS, { recursive: true });
+const scratch = mkdtempSync(join(tmpdir(), 'mag-cal-web-'));
+
+let server;
+let browser;
+let url;
+
+before(async () => {
+  server = await serve(WEB_ROOT, 0);
+  url = `http://127.0.0.1:${server.address().port}/`;
+  browser = await chromium.launch({
+    executablePath: env('CHROMIUM'),
+    headless: true,
+    // As root in CI: no sandbox. No background connections (the machine's
+    // network is closed). WebGL through SwiftShader, as there is no GPU.
+    args: [
+      '--no-sandbox',
+      '--disable-quic',
+      '--no-first-run',
+      '--disable-background-networking',
+      '--disable-component-update',
+      '--disable-sync',
+      '--use-angle=swiftshader',
+      '--enable-unsafe-swiftshader',
+    ],
+  });
+});
+
+after(async () => {
+  await browser?.close();
+  server?.close();
+});
+
+// A page with the core loaded; console errors fail the test.
+async function openPage(init) {
+  const context = await browser.newContext({ viewport: { width: 1280, height: 1500 }, acceptDownloads: true });
+  const page = await context.newPage();
+  const errors = [];
+  page.on('pageerror', (err) => errors.push(err.message));
+  page.on('console', (msg) => msg.type() === 'error' && errors.push(msg.text()));
+  if (init) await page.addInitScript(init);
+  await page.goto(url);
+  await page.waitForFunction(() => window.magcal?.ready === true);
+  return { page, errors, context };
+}
+
+// `magcal fit --format json` of a file: [exit code, parsed JSON or the
+// stderr line].
+function magcal(file, ...args) {
+  const run = spawnSync(MAGCAL, ['fit', file, '--format', 'json', ...args], { encoding: 'utf8' });
+  if (run.status === 0) return [0, JSON.parse(run.stdout)];
+  return [run.status, run.stderr.trim()];
+}
+
+// The figures the page shows, at full precision (their data-value).
+async function shown(page) {
+  return page.evaluate(() => {
+    const v = (name) => Number(document.querySelector(`[data-name="${name}"]`).dataset.value);
+    return {
+      hard_iron: [0, 1, 2].map((i) => v(`b${i}`)),
+      soft_iron: [0, 1, 2].map((r) => [0, 1, 2].map((c) => v(`W${r}${c}`))),
+      field_strength: v('field strength'),
+      radial_rms: v('radial RMS'),
+      fit_error: v('fit error'),
+      coverage: v('coverage'),
+    };
+  });
+}
+
+function assertClose(actual, expected, tol, what) {
+  const scale = Math.max(1, Math.abs(expected));
+  assert.ok(Math.abs(actual - expected) <= tol * scale, `${what}: page ${actual}, magcal ${expected}`);
+}
+
+function assertSameCalibration(page, cli, tol) {
+  for (let i = 0; i < 3; i += 1) {
+    assertClose(page.hard_iron[i], cli.hard_iron[i], tol, `b[${i}]`);
+    for (let j = 0; j < 3; j += 1) {
+      // W is about 1 / field: compared relative to the matrix's scale.
+      const scale = Math.abs(cli.soft_iron[0][0]);
+      assert.ok(
+        Math.abs(page.soft_iron[i][j] - cli.soft_iron[i][j]) <= tol * scale,
+        `W[${i}][${j}]: page ${page.soft_iron[i][j]}, magcal ${cli.soft_iron[i][j]}`,
+      );
+    }
+  }
+  assertClose(page.field_strength, cli.field_strength, tol, 'field strength');
+  assertClose(page.radial_rms, cli.quality.radial_rms, tol, 'radial RMS');
+  assertClose(page.fit_error, cli.quality.fit_error, tol, 'fit error');
+  assertClose(page.coverage, cli.quality.coverage, tol, 'coverage');
+}
+
+async function openFile(page, file) {
+  await page.setInputFiles('#file', file);
+  await page.waitForFunction((name) => document.querySelector('#verdict')?.textContent.endsWith(name), file.split('/').pop());
+}
+
+test('a shared recording shows what magcal fit gives, in f64 and f32', async () => {
+  const { page, errors, context } = await openPage();
+  for (const [name, precision, tol] of [
+    ['icm20948_mag_300.csv', 'f64', 1e-9],
+    ['imu_gnss_1252.csv', 'f64', 1e-9],
+    ['mag3_raw_541.csv', 'f32', 1e-5],
+  ]) {
+    const file = join(REAL, name);
+    await page.selectOption('#precision', precision);
+    await openFile(page, file);
+    assert.match(await page.textContent('#verdict'), /^Calibrated/);
+    const [code, cli] = magcal(file, '--precision', precision);
+    assert.equal(code, 0);
+    assertSameCalibration(await shown(page), cli, tol);
+    // The counts, as the CLI gives them.
+    const samples = await page.textContent('[data-name="samples"]');
+    assert.ok(samples.startsWith(`${cli.samples_used} used of`), samples);
+
+    // The download is the CLI's JSON (but for the fit's time).
+    const [download] = await Promise.all([page.waitForEvent('download'), page.click('#download')]);
+    const saved = JSON.parse(readFileSync(await download.path(), 'utf8'));
+    delete saved.timing_us;
+    delete cli.timing_us;
+    assert.deepEqual(saved, cli);
+    // ... and `magcal apply` reads it.
+    const calFile = join(scratch, `${name}.json`);
+    writeFileSync(calFile, JSON.stringify(saved));
+    execFileSync(MAGCAL, ['apply', calFile, file], { encoding: 'utf8', stdio: 'pipe' });
+
+    // The norm plot has a dot per finite sample.
+    const dots = await page.locator('#norms circle').count();
+    assert.equal(dots, (await page.evaluate(() => window.magcal.result.norms.filter(Number.isFinite).length)));
+    await page.screenshot({ path: join(SHOTS, `file-${name}.png`), fullPage: true });
+  }
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('a refused recording shows its reason, as the CLI words it', async () => {
+  const { page, errors, context } = await openPage();
+  const file = join(REAL, 'planar_243.txt');
+  await openFile(page, file);
+  const [code, message] = magcal(file);
+  assert.equal(code, 3);
+  assert.match(await page.textContent('#verdict'), /^Refused/);
+  assert.equal(`magcal: ${await page.textContent('#message')}`, message);
+  assert.ok(await page.isDisabled('#download'));
+  await page.screenshot({ path: join(SHOTS, 'refused-planar_243.png'), fullPage: true });
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+// A recorded stream as a board running Adafruit's or PJRC's calibration
+// sketch prints it: `Raw:` lines of integers, with a banner and other
+// lines between. The magnetometer is magcal_25598.txt (a long real 3-D
+// recording, units of about 0.7 at full field) times SCALE, rounded; that
+// recording has no accelerometer or gyroscope, sent as 0.
+const SCALE = 600;
+function streamRows() {
+  return readFileSync(join(REAL, 'magcal_25598.txt'), 'utf8')
+    .trim()
+    .split('\n')
+    .map((row) => row.trim().split(/\s+/).map((v) => Math.round(Number(v) * SCALE)));
+}
+
+function rawStream(rows) {
+  const lines = ['Adafruit sensor calibration (test double)'];
+  rows.forEach((m, i) => {
+    lines.push(`Raw:0,0,0,0,0,0,${m.join(',')}`);
+    if (i % 100 === 0) lines.push('Uni:0.000,0.000,0.000,0.0000,0.0000,0.0000,0.000,0.000,0.000');
+  });
+  return `${lines.join('\r\n')}\r\n`;
+}
+
+// navigator.serial replaced by a port that plays `text` back in small
+// chunks and records what the page writes.
+function serialDouble(text) {
+  window.__written = [];
+  const bytes = new TextEncoder().encode(text);
+  const port = {
+    async open(options) {
+      window.__baud = options.baudRate;
+      let at = 0;
+      this.readable = new ReadableStream({
+        async pull(controller) {
+          if (at >= bytes.length) {
+            controller.close();
+            return;
+          }
+          await new Promise((r) => setTimeout(r, 1));
+          controller.enqueue(bytes.slice(at, at + 200));
+          at += 200;
+        },
+      });
+      this.writable = new WritableStream({
+        write(chunk) {
+          window.__written.push(...chunk);
+        },
+      });
+    },
+    async close() {},
+  };
+  Object.defineProperty(navigator, 'serial', { value: { requestPort: async () => port } });
+}
+
+// MotionCal's packet built here from a calibration, independently of the
+// page: header, 16 little-endian floats, CRC-16 by a lookup table.
+function motioncalPacket(cal) {
+  const table = Array.from({ length: 256 }, (_, n) => {
+    let c = n;
+    for (let k = 0; k < 8; k += 1) c = c & 1 ? (c >>> 1) ^ 0xa001 : c >>> 1;
+    return c;
+  });
+  const crc16 = (bytes) => bytes.reduce((c, b) => (c >>> 8) ^ table[(c ^ b) & 0xff], 0xffff);
+  const buf = new DataView(new ArrayBuffer(68));
+  buf.setUint8(0, 117);
+  buf.setUint8(1, 84);
+  const rho = cal.field_strength;
+  const w = cal.soft_iron;
+  const values = [0, 0, 0, 0, 0, 0, ...cal.hard_iron.map((b) => b / 10), rho / 10,
+    rho * w[0][0], rho * w[1][1], rho * w[2][2], rho * w[0][1], rho * w[0][2], rho * w[1][2]];
+  values.forEach((v, i) => buf.setFloat32(2 + 4 * i, v, true));
+  const bytes = new Uint8Array(buf.buffer);
+  buf.setUint16(66, crc16(bytes.slice(0, 66)), true);
+  assert.equal(crc16(bytes), 0);
+  return [...bytes];
+}
+
+test('a Raw: stream through the serial port: progress, coverage, fit, and send to board', async () => {
+  const rows = streamRows();
+  const stream = rawStream(rows);
+  const { page, errors, context } = await openPage([serialDouble.toString(), `serialDouble(${JSON.stringify(stream)});`].join('\n'));
+  await page.click('#connect');
+  await page.waitForFunction(() => window.magcal.streamEnded === true, null, { timeout: 60_000 });
+  assert.equal(await page.evaluate(() => window.__baud), 115200);
+
+  const p = await page.evaluate(() => window.magcal.progress);
+  const rawLines = stream.split('\r\n').filter((l) => l.startsWith('Raw:')).length;
+  assert.equal(p.lines, rawLines);
+  assert.equal(p.skipped, stream.split('\r\n').filter((l) => l && !l.startsWith('Raw:')).length);
+  assert.ok(p.ready && p.percent === 100, JSON.stringify(p));
+  assert.ok(p.cells_visited >= 36 && p.samples >= 100 && p.samples < rawLines, JSON.stringify(p));
+  // What the page shows of it.
+  assert.equal(await page.evaluate(() => document.querySelector('#progress').value), 100);
+  assert.equal(await page.locator('#cells div.visited').count(), p.cells_visited);
+  assert.match(await page.textContent('#progress-text'), new RegExp(`^100 %: ${p.samples} samples kept of ${rawLines}`));
+
+  // The final fit is magcal's fit of the samples the collector kept.
+  assert.match(await page.textContent('#verdict'), /^Calibrated/);
+  const kept = await page.evaluate(() => window.magcal.result.raw);
+  assert.equal(kept.length, p.samples);
+  const keptFile = join(scratch, 'kept.csv');
+  writeFileSync(keptFile, `${kept.map((s) => s.join(',')).join('\n')}\n`);
+  const [code, cli] = magcal(keptFile);
+  assert.equal(code, 0);
+  assertSameCalibration(await shown(page), cli, 1e-9);
+  // ... and close to magcal's fit of the whole recording.
+  const wholeFile = join(scratch, 'stream.csv');
+  writeFileSync(wholeFile, `${rows.map((m) => m.join(',')).join('\n')}\n`);
+  const [, whole] = magcal(wholeFile);
+  for (let i = 0; i < 3; i += 1) {
+    assert.ok(Math.abs(cli.hard_iron[i] - whole.hard_iron[i]) < 0.05 * whole.field_strength, `b[${i}]`);
+  }
+  await page.screenshot({ path: join(SHOTS, 'serial-stream.png'), fullPage: true });
+
+  // Send to board: the 68 bytes MotionCal would send.
+  assert.ok(!(await page.isDisabled('#send')));
+  await page.click('#send');
+  await page.waitForFunction(() => window.magcal.sent === 1);
+  const written = await page.evaluate(() => window.__written);
+  assert.deepEqual(written, motioncalPacket(cli));
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('the time of a fit in the page (printed for docs/benchmarks.md)', async () => {
+  const { page, context } = await openPage();
+  for (const name of ['icm20948_mag_300.csv', 'magcal_25598.txt']) {
+    const bytes = [...readFileSync(join(REAL, name))];
+    const figures = await page.evaluate(
+      ({ bytes, name }) => {
+        const data = new Uint8Array(bytes);
+        const runs = [];
+        for (let k = 0; k < 11; k += 1) {
+          const t0 = performance.now();
+          const doc = window.magcal.core.fit(data, { name, precision: 'f32' });
+          runs.push([doc.fit.timing_us / 1000, performance.now() - t0]);
+        }
+        const median = (v) => v.sort((a, b) => a - b)[(v.length - 1) / 2];
+        return { fit: median(runs.map((r) => r[0])), call: median(runs.map((r) => r[1])) };
+      },
+      { bytes, name },
+    );
+    assert.ok(figures.fit >= 0 && figures.call >= figures.fit, JSON.stringify(figures));
+    console.log(`web fit ${name} (f32, adc2): fit ${figures.fit.toFixed(2)} ms, whole call (parse, fit, JSON) ${figures.call.toFixed(1)} ms, median of 11`);
+  }
+  await context.close();
+});

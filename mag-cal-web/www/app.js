@@ -1,0 +1,316 @@
+// The page: inputs (a file, a serial port), the views, the result and the
+// outputs. Every number shown comes from the core (core.js); this file
+// draws and formats.
+
+import { loadCore } from './core.js';
+import { Cloud } from './cloud.js';
+
+const $ = (id) => document.getElementById(id);
+const METHODS = ['adc2', 'adc2-iter', 'adc1', 'ls', 'submle'];
+const BANDS = 6;
+const SECTORS = 8;
+
+const core = await loadCore('./mag_cal_web.wasm');
+const rawView = new Cloud($('raw-view'), { sphere: false });
+const calView = new Cloud($('cal-view'), { sphere: true });
+
+// What the page shows; read by the browser tests.
+const state = {
+  source: null, // 'file' or 'serial'
+  result: null, // the core's last fit document
+  progress: null, // the collector's last progress
+  raw: [], // samples received over serial
+  sent: 0, // packets written to the board
+};
+state.core = core;
+window.magcal = state;
+
+for (const m of METHODS) $('method').append(new Option(m, m));
+buildCells();
+
+function options(name) {
+  return {
+    name,
+    precision: $('precision').value,
+    method: $('method').value,
+    plain: $('plain').checked,
+    columns: $('columns').value.trim(),
+  };
+}
+
+function setStatus(text, kind = '') {
+  $('status').textContent = text;
+  $('status').className = `status ${kind}`;
+}
+
+// ---- a file ---------------------------------------------------------------
+
+let lastFile = null;
+
+async function openFile(file) {
+  await stopSerial();
+  lastFile = { name: file.name, bytes: new Uint8Array(await file.arrayBuffer()) };
+  fitFile();
+}
+
+function fitFile() {
+  if (!lastFile) return;
+  state.source = 'file';
+  $('live').hidden = true;
+  const doc = core.fit(lastFile.bytes, options(lastFile.name));
+  rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron);
+  showResult(doc, lastFile.name);
+}
+
+$('file').addEventListener('change', (e) => {
+  if (e.target.files.length) openFile(e.target.files[0]);
+});
+document.addEventListener('dragover', (e) => e.preventDefault());
+document.addEventListener('drop', (e) => {
+  e.preventDefault();
+  if (e.dataTransfer.files.length) openFile(e.dataTransfer.files[0]);
+});
+for (const id of ['precision', 'method', 'plain', 'columns']) {
+  $(id).addEventListener('change', () => (state.source === 'serial' ? fitLive(true) : fitFile()));
+}
+
+// ---- a board over WebSerial -----------------------------------------------
+
+let port = null;
+let reader = null;
+let acceptedSinceFit = 0;
+
+async function connect() {
+  if (!('serial' in navigator)) {
+    setStatus('This browser has no WebSerial: use Chrome, Edge or another Chromium browser.', 'bad');
+    return;
+  }
+  try {
+    port = await navigator.serial.requestPort();
+    await port.open({ baudRate: 115200 });
+  } catch (err) {
+    setStatus(`No port opened: ${err.message}`, 'bad');
+    port = null;
+    return;
+  }
+  state.source = 'serial';
+  state.raw = [];
+  state.result = null;
+  lastFile = null;
+  acceptedSinceFit = 0;
+  core.liveReset();
+  $('live').hidden = false;
+  $('connect').disabled = true;
+  $('disconnect').disabled = false;
+  setStatus('Connected: turn the board slowly in every direction.');
+  readLines();
+}
+
+async function readLines() {
+  const decoder = new TextDecoderStream();
+  const done = port.readable.pipeTo(decoder.writable).catch(() => {});
+  reader = decoder.readable.getReader();
+  let pending = '';
+  try {
+    for (;;) {
+      const { value, done: end } = await reader.read();
+      if (end) break;
+      pending += value;
+      let nl;
+      while ((nl = pending.indexOf('\n')) >= 0) {
+        onLine(pending.slice(0, nl));
+        pending = pending.slice(nl + 1);
+      }
+      redrawLive();
+    }
+  } catch (err) {
+    setStatus(`Serial read stopped: ${err.message}`, 'bad');
+  }
+  if (pending) onLine(pending);
+  reader = null;
+  await done;
+  fitLive(true);
+  state.streamEnded = true;
+}
+
+function onLine(line) {
+  const r = core.liveLine(line);
+  state.progress = r.progress;
+  if (r.kind !== 'raw') return;
+  if (r.sample.every(Number.isFinite)) state.raw.push(r.sample);
+  if (r.offer === 'accepted') acceptedSinceFit += 1;
+}
+
+let redrawPending = false;
+function redrawLive() {
+  if (redrawPending) return;
+  redrawPending = true;
+  requestAnimationFrame(() => {
+    redrawPending = false;
+    const p = state.progress;
+    if (!p) return;
+    showProgress(p);
+    rawView.setPoints(state.raw, null, state.result?.fit?.hard_iron);
+    // Refit as the collection grows, once it is ready.
+    if (p.ready && acceptedSinceFit >= 25) fitLive(false);
+  });
+}
+
+function fitLive(force) {
+  if (state.source !== 'serial' || !state.progress) return;
+  if (!force && !state.progress.ready) return;
+  acceptedSinceFit = 0;
+  const doc = core.liveFit(options('serial'));
+  if (doc.status === 'ok' || force) showResult(doc, 'serial');
+}
+
+async function stopSerial() {
+  if (!port) return;
+  try {
+    await reader?.cancel();
+  } catch (_) {
+    /* already closed */
+  }
+  try {
+    await port.close();
+  } catch (_) {
+    /* the stream may still hold it */
+  }
+  port = null;
+  $('connect').disabled = false;
+  $('disconnect').disabled = true;
+  $('send').disabled = true;
+}
+
+$('connect').addEventListener('click', connect);
+$('disconnect').addEventListener('click', stopSerial);
+
+// ---- coverage ---------------------------------------------------------------
+
+function buildCells() {
+  const grid = $('cells');
+  // North (band 5) at the top; sectors of longitude left to right.
+  for (let band = BANDS - 1; band >= 0; band -= 1) {
+    for (let sector = 0; sector < SECTORS; sector += 1) {
+      const cell = document.createElement('div');
+      cell.dataset.cell = band * SECTORS + sector;
+      cell.title = `band ${band}, sector ${sector * 45}-${sector * 45 + 45} deg`;
+      grid.append(cell);
+    }
+  }
+}
+
+function showProgress(p) {
+  $('progress').value = p.percent;
+  $('progress-text').textContent =
+    `${p.percent} %: ${p.samples} samples kept of ${p.lines} Raw: lines, ` +
+    `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}`;
+  for (const cell of $('cells').children) {
+    cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
+  }
+}
+
+// ---- the result -------------------------------------------------------------
+
+const digits = (v, n = 7) => (Number.isFinite(v) ? Number(v.toPrecision(n)).toString() : String(v));
+
+function figure(name, value, note = '') {
+  const v = typeof value === 'number' ? digits(value) : value;
+  const data = typeof value === 'number' ? ` data-value="${value}"` : '';
+  return `<tr><th>${name}</th><td data-name="${name}"${data}>${v}</td><td class="note">${note}</td></tr>`;
+}
+
+function showResult(doc, name) {
+  state.result = doc;
+  $('result').hidden = false;
+  const ok = doc.status === 'ok';
+  $('verdict').textContent = ok
+    ? `Calibrated: ${name}`
+    : doc.status === 'refused'
+      ? `Refused: ${name}`
+      : `Not read: ${name}`;
+  $('verdict').className = ok ? 'good' : 'bad';
+  $('message').textContent = ok ? warningText(doc) : doc.message;
+  $('message').className = `message ${ok ? (doc.warnings.length ? 'warn' : '') : 'bad'}`;
+  for (const id of ['download', 'copy-c', 'copy-rust']) $(id).disabled = !ok;
+  $('send').disabled = !ok || !port;
+  if (!ok) {
+    $('figures').innerHTML = doc.columns ? `<p>${doc.rows} rows from ${doc.columns}</p>` : '';
+    $('norms').innerHTML = '';
+    calView.setPoints([], null, null);
+    $('report').textContent = '';
+    setStatus(doc.message, 'bad');
+    return;
+  }
+  const f = doc.fit;
+  const q = f.quality;
+  const w = f.soft_iron;
+  $('figures').innerHTML = `<table class="figures">
+    ${figure('hard iron b', `<span class="vec">${f.hard_iron.map((v, i) => `<span data-name="b${i}" data-value="${v}">${digits(v)}</span>`).join(' ')}</span>`, 'sensor units')}
+    ${figure('soft iron W', `<span class="mat">${w.map((row, r) => row.map((v, c) => `<span data-name="W${r}${c}" data-value="${v}">${digits(v)}</span>`).join(' ')).join('<br>')}</span>`, 'W (y − b) on the unit sphere')}
+    ${figure('field strength', f.field_strength, 'sensor units')}
+    ${figure('radial RMS', q.radial_rms, 'of the field')}
+    ${figure('fit error', q.fit_error, 'robust sigma; warned above 0.05, refused above 0.2')}
+    ${figure('coverage', q.coverage, 'refused below 0.05; full sphere about 0.33')}
+    ${figure('flatness', q.flatness, 'refused below 0.03')}
+    ${figure('distortion', q.distortion, 'condition number of M; refused above 16')}
+    ${figure('lack of fit', q.lack_of_fit, 'systematic misfit; refused above 0.01 when significant')}
+    ${figure('outlier share', q.outlier_share, 'refused above 0.25')}
+    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
+    ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
+    </table>`;
+  $('snippet-c').textContent = doc.snippets.c;
+  $('snippet-rust').textContent = doc.snippets.rust;
+  $('report').textContent = doc.text;
+  calView.setPoints(doc.calibrated, doc.classes, [0, 0, 0]);
+  drawNorms(doc.norms, doc.classes);
+  setStatus(state.source === 'serial' ? 'Calibrated from the board: keep turning to refine, or send it.' : 'Calibrated.', 'good');
+}
+
+function warningText(doc) {
+  if (!doc.warnings.length) return 'No warnings.';
+  return doc.warnings.map((w) => `Warning: ${w.text}.`).join(' ');
+}
+
+function drawNorms(norms, classes) {
+  const svg = $('norms');
+  const finite = norms.filter(Number.isFinite);
+  const lo = Math.min(0.9, ...finite);
+  const hi = Math.max(1.1, ...finite);
+  const x = (i) => (norms.length > 1 ? (i / (norms.length - 1)) * 790 + 5 : 400);
+  const y = (v) => 215 - ((v - lo) / (hi - lo)) * 210;
+  const dots = norms
+    .map((v, i) => (Number.isFinite(v) ? `<circle class="${classes[i].split(':')[0]}" cx="${x(i).toFixed(1)}" cy="${y(v).toFixed(1)}" r="1.6"/>` : ''))
+    .join('');
+  svg.innerHTML =
+    `<line class="unit" x1="0" x2="800" y1="${y(1)}" y2="${y(1)}"/>` +
+    `<text x="4" y="12">${digits(hi, 3)}</text><text x="4" y="214">${digits(lo, 3)}</text>${dots}`;
+}
+
+// ---- outputs ------------------------------------------------------------------
+
+$('download').addEventListener('click', () => {
+  const blob = new Blob([state.result.json], { type: 'application/json' });
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = 'calibration.json';
+  a.click();
+  URL.revokeObjectURL(a.href);
+});
+$('copy-c').addEventListener('click', () => navigator.clipboard.writeText(state.result.snippets.c));
+$('copy-rust').addEventListener('click', () => navigator.clipboard.writeText(state.result.snippets.rust));
+$('send').addEventListener('click', async () => {
+  if (!port?.writable || state.result?.status !== 'ok') return;
+  const writer = port.writable.getWriter();
+  try {
+    await writer.write(new Uint8Array(state.result.packet));
+    state.sent += 1;
+    $('send-status').textContent = 'Sent MotionCal\'s 68-byte packet (units: 10 counts per uT).';
+  } catch (err) {
+    $('send-status').textContent = `Not sent: ${err.message}`;
+  } finally {
+    writer.releaseLock();
+  }
+});
+
+state.ready = true;
