@@ -212,7 +212,21 @@ pub struct Live {
     lines: usize,
     /// Other lines skipped (`Uni:`, `Cal1:`, a sketch's banner, ...).
     skipped: usize,
+    /// The collector's refusals, by [`OFFER_NAMES`] (index 0, accepted,
+    /// unused).
+    refused: [usize; OFFER_NAMES.len()],
 }
+
+/// The names of the collector's answers, as [`Live::line`] gives them.
+pub const OFFER_NAMES: [&str; 7] = [
+    "accepted",
+    "too_close",
+    "not_finite",
+    "full",
+    "glitch",
+    "outlier",
+    "refused",
+];
 
 impl Live {
     /// Reads one line of the stream: a `Raw:` line's magnetometer (fields
@@ -230,8 +244,11 @@ impl Live {
                 .ok()
                 .and_then(|t| t.samples.first().copied())
                 .unwrap_or([f64::NAN; 3]);
-            let offer = self.collector.offer(sample);
-            json!({ "kind": "raw", "sample": sample, "offer": offer_name(offer) })
+            let offer = offer_index(self.collector.offer(sample));
+            if let Some(n) = self.refused.get_mut(offer).filter(|_| offer > 0) {
+                *n += 1;
+            }
+            json!({ "kind": "raw", "sample": sample, "offer": OFFER_NAMES[offer % OFFER_NAMES.len()] })
         } else {
             self.skipped += 1;
             json!({ "kind": "skipped" })
@@ -243,8 +260,10 @@ impl Live {
     /// The collector's progress: `samples`, `cells_visited`, `cells`,
     /// `percent`, `ready`, `visited` (one flag per cell, cell
     /// `band * 8 + sector`: six bands of equal area from the south pole,
-    /// eight sectors of longitude from +x counter-clockwise), and the
-    /// stream's `lines` and `skipped`.
+    /// eight sectors of longitude from +x counter-clockwise), the stream's
+    /// `lines` and `skipped`, and `refused`: the collector's refusals by
+    /// name (`too_close`, `not_finite`: a cut-short line, `full`, `glitch`,
+    /// `outlier`).
     pub fn progress_json(&self) -> Value {
         let p: Progress = self.collector.progress();
         let visited: Vec<bool> = (0..p.cells).map(|c| (p.visited >> c) & 1 == 1).collect();
@@ -257,6 +276,12 @@ impl Live {
             "visited": visited,
             "lines": self.lines,
             "skipped": self.skipped,
+            "refused": OFFER_NAMES
+                .iter()
+                .zip(self.refused)
+                .skip(1)
+                .map(|(name, n)| (name.to_string(), json!(n)))
+                .collect::<serde_json::Map<_, _>>(),
         })
     }
 
@@ -288,16 +313,16 @@ impl Live {
     }
 }
 
-/// The name of a collector's answer.
-fn offer_name(offer: Offer) -> &'static str {
+/// The index of a collector's answer in [`OFFER_NAMES`].
+fn offer_index(offer: Offer) -> usize {
     match offer {
-        Offer::Accepted => "accepted",
-        Offer::TooClose => "too_close",
-        Offer::NotFinite => "not_finite",
-        Offer::Full => "full",
-        Offer::Glitch => "glitch",
-        Offer::Outlier => "outlier",
-        _ => "refused",
+        Offer::Accepted => 0,
+        Offer::TooClose => 1,
+        Offer::NotFinite => 2,
+        Offer::Full => 3,
+        Offer::Glitch => 4,
+        Offer::Outlier => 5,
+        _ => 6,
     }
 }
 

@@ -190,6 +190,10 @@ function rawStream(rows) {
   const lines = ['Adafruit sensor calibration (test double)'];
   rows.forEach((m, i) => {
     lines.push(`Raw:0,0,0,0,0,0,${m.join(',')}`);
+    // A serial line caught half-way, an all-zero glitch and a wild reading.
+    if (i === 300) lines.push('Raw:0,0,0,0,0');
+    if (i === 310) lines.push('Raw:0,0,0,0,0,0,0,0,0');
+    if (i === 320) lines.push('Raw:0,0,0,0,0,0,30000,-30000,30000');
     if (i % 100 === 0) lines.push('Uni:0.000,0.000,0.000,0.0000,0.0000,0.0000,0.000,0.000,0.000');
   });
   return `${lines.join('\r\n')}\r\n`;
@@ -266,7 +270,13 @@ test('a Raw: stream through the serial port: progress, coverage, fit, and send t
   // What the page shows of it.
   assert.equal(await page.evaluate(() => document.querySelector('#progress').value), 100);
   assert.equal(await page.locator('#cells div.visited').count(), p.cells_visited);
-  assert.match(await page.textContent('#progress-text'), new RegExp(`^100 %: ${p.samples} samples kept of ${rawLines}`));
+  const progressText = await page.textContent('#progress-text');
+  assert.match(progressText, new RegExp(`^100 %: ${p.samples} samples kept of ${rawLines}`));
+  // The planted bad lines were refused, each for its reason, and said so.
+  assert.equal(p.refused.not_finite, 1, JSON.stringify(p.refused));
+  assert.equal(p.refused.glitch, 1, JSON.stringify(p.refused));
+  assert.equal(p.refused.outlier, 1, JSON.stringify(p.refused));
+  assert.match(progressText, /not kept: 1 cut short or not numbers, 1 glitches \(zeros, rails\), 1 outliers/);
 
   // The final fit is magcal's fit of the samples the collector kept.
   assert.match(await page.textContent('#verdict'), /^Calibrated/);

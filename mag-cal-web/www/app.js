@@ -57,7 +57,13 @@ function fitFile() {
   if (!lastFile) return;
   state.source = 'file';
   $('live').hidden = true;
-  const doc = core.fit(lastFile.bytes, options(lastFile.name));
+  let doc;
+  try {
+    doc = core.fit(lastFile.bytes, options(lastFile.name));
+  } catch (err) {
+    setStatus(`Internal error in the core (please report it): ${err.message}`, 'bad');
+    return;
+  }
   rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron);
   showResult(doc, lastFile.name);
 }
@@ -134,7 +140,13 @@ async function readLines() {
 }
 
 function onLine(line) {
-  const r = core.liveLine(line);
+  let r;
+  try {
+    r = core.liveLine(line);
+  } catch (err) {
+    setStatus(`Internal error in the core (please report it): ${err.message}`, 'bad');
+    return;
+  }
   state.progress = r.progress;
   if (r.kind !== 'raw') return;
   if (r.sample.every(Number.isFinite)) state.raw.push(r.sample);
@@ -200,11 +212,23 @@ function buildCells() {
   }
 }
 
+// The collector's refusals in words (too_close, the usual one, left out).
+const REFUSED = {
+  not_finite: 'cut short or not numbers',
+  glitch: 'glitches (zeros, rails)',
+  outlier: 'outliers (far from the others)',
+  full: 'after the collector was full',
+};
+
 function showProgress(p) {
   $('progress').value = p.percent;
+  const refused = Object.entries(REFUSED)
+    .filter(([name]) => p.refused[name] > 0)
+    .map(([name, words]) => `${p.refused[name]} ${words}`);
   $('progress-text').textContent =
     `${p.percent} %: ${p.samples} samples kept of ${p.lines} Raw: lines, ` +
-    `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}`;
+    `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
+    (refused.length ? `; not kept: ${refused.join(', ')}` : '');
   for (const cell of $('cells').children) {
     cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
   }

@@ -1,0 +1,124 @@
+//! Properties of the page's entry points on any input: no panic (a panic
+//! in the page is a trap that leaves the core unusable), one well-formed
+//! JSON document per call, counts that add up, and a packet that checks.
+
+use mag_cal_web::{fit_json, packet, Live};
+use proptest::prelude::*;
+use serde_json::Value;
+
+/// Lines a logger or a serial port may give: numbers (some huge, zero or
+/// non-finite), `Raw:` lines whole or cut short, headers, noise.
+fn line() -> impl Strategy<Value = String> {
+    let number = prop_oneof![
+        (-2000i32..2000).prop_map(|v| v.to_string()),
+        any::<f64>().prop_map(|v| v.to_string()),
+        Just("nan".to_owned()),
+        Just("0".to_owned()),
+        Just("32767".to_owned()),
+        Just("1e308".to_owned()),
+    ];
+    prop_oneof![
+        prop::collection::vec(number.clone(), 0..12).prop_map(|f| f.join(",")),
+        prop::collection::vec(number, 0..11).prop_map(|f| format!("Raw:{}", f.join(","))),
+        Just("magx,magy,magz".to_owned()),
+        Just("Uni:0.1,0.2".to_owned()),
+        "[ -~]{0,40}",
+    ]
+}
+
+/// A sphere's worth of `Raw:` lines about an offset, with the cases'
+/// corruption mixed in: enough to reach a fit.
+fn sphere_lines(n: usize, offset: [f64; 3]) -> Vec<String> {
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = i as f64 * 2.399_963;
+            let m = [r * phi.cos(), r * phi.sin(), z];
+            format!(
+                "Raw:0,0,0,0,0,0,{:.0},{:.0},{:.0}",
+                offset[0] + 450.0 * m[0],
+                offset[1] + 420.0 * m[1],
+                offset[2] + 470.0 * m[2]
+            )
+        })
+        .collect()
+}
+
+fn check_fit_doc(code: u32, text: &str) -> Value {
+    let doc: Value = serde_json::from_str(text).expect("one JSON document");
+    let status = doc["status"].as_str().expect("a status");
+    assert_eq!(doc["code"].as_u64(), Some(u64::from(code)), "{text}");
+    match status {
+        "ok" => {
+            assert_eq!(code, 0);
+            let rows = doc["rows"].as_u64().unwrap() as usize;
+            for key in ["raw", "calibrated", "norms", "classes"] {
+                assert_eq!(doc[key].as_array().map(Vec::len), Some(rows), "{key}");
+            }
+            let bytes: Vec<u8> = doc["packet"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|b| b.as_u64().unwrap() as u8)
+                .collect();
+            assert_eq!(bytes.len(), packet::LEN);
+            assert_eq!(packet::crc16(&bytes), 0);
+            let fit: Value = serde_json::from_str(doc["json"].as_str().unwrap()).unwrap();
+            assert_eq!(fit, doc["fit"]);
+        }
+        "refused" => assert_eq!(code, 3),
+        "error" => assert_eq!(code, 2),
+        other => panic!("status {other}"),
+    }
+    if status != "ok" {
+        assert!(!doc["message"].as_str().unwrap().is_empty());
+    }
+    doc
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn any_bytes_give_one_document(bytes in prop::collection::vec(any::<u8>(), 0..400),
+                                   precision in prop_oneof![Just("f32"), Just("f64"), Just("f16")],
+                                   plain in any::<bool>()) {
+        let options = format!(r#"{{"precision":"{precision}","plain":{plain}}}"#);
+        let (code, text) = fit_json(&bytes, options.as_bytes(), &|| 0.0);
+        check_fit_doc(code, &text);
+    }
+
+    #[test]
+    fn any_lines_give_one_document(lines in prop::collection::vec(line(), 0..60)) {
+        let text = lines.join("\n");
+        let (code, doc) = fit_json(text.as_bytes(), b"", &|| 0.0);
+        check_fit_doc(code, &doc);
+    }
+
+    #[test]
+    fn a_corrupted_stream_adds_up_and_fits(noise in prop::collection::vec((0usize..600, line()), 0..40),
+                                           offset in prop::array::uniform3(-3000.0f64..3000.0)) {
+        let mut lines = sphere_lines(600, offset);
+        for (at, line) in noise {
+            lines.insert(at.min(lines.len()), line);
+        }
+        let mut live = Live::default();
+        let mut raw_lines = 0u64;
+        for line in &lines {
+            let doc: Value = serde_json::from_str(&live.line(line.as_bytes())).unwrap();
+            if line.trim().starts_with("Raw:") {
+                raw_lines += 1;
+                prop_assert_eq!(doc["kind"].as_str(), Some("raw"));
+            } else {
+                prop_assert_eq!(doc["kind"].as_str(), Some("skipped"));
+            }
+        }
+        let p = live.progress_json();
+        prop_assert_eq!(p["lines"].as_u64(), Some(raw_lines));
+        let refused: u64 = p["refused"].as_object().unwrap().values().filter_map(Value::as_u64).sum();
+        prop_assert_eq!(refused + p["samples"].as_u64().unwrap(), raw_lines);
+        let (code, text) = live.fit(b"", &|| 0.0);
+        check_fit_doc(code, &text);
+    }
+}
