@@ -2,6 +2,8 @@
 
 use std::fmt::Write as _;
 
+use mag_cal_core::Warning;
+
 use crate::fit::Outcome;
 
 /// Significant digits of the numbers in the text report.
@@ -72,10 +74,21 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
         sig(o.quality.lack_of_fit, 2),
         sig(100.0 * o.quality.outlier_share, 2)
     );
+    // One line a warning: its name and the core's sentence for people.
     let warnings = if o.quality.warnings.is_empty() {
         "none".to_owned()
     } else {
-        o.quality.warnings.join(", ")
+        o.quality
+            .warnings
+            .iter()
+            .map(
+                |name| match Warning::ALL.into_iter().find(|w| w.name() == *name) {
+                    Some(w) => format!("{name}: {w}"),
+                    None => (*name).to_owned(),
+                },
+            )
+            .collect::<Vec<_>>()
+            .join("\n                ")
     };
     let q = &o.quality;
     let _ = writeln!(
@@ -322,7 +335,10 @@ mod tests {
         assert!(t.contains("field strength  250.0000"));
         assert!(t.contains("calibrated = W (raw - b)"));
         assert!(t.contains("  passes        1  "), "{t}");
-        assert!(t.contains("  warnings      pass_cap\n"), "{t}");
+        assert!(
+            t.contains("  warnings      pass_cap: iterated ADC2 stopped at its pass cap: "),
+            "{t}"
+        );
         assert!(
             t.contains(
                 "  samples       300 used of 305: 2 dropped (1 non-finite, 1 repeated), \

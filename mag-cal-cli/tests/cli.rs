@@ -806,7 +806,8 @@ fn text_format_shows_passes_and_warnings() {
     // The 2 rows cut by their residual are the one warning; --plain trusts
     // them and warns of nothing.
     assert!(
-        r.stdout.contains("  warnings      outliers_rejected\n"),
+        r.stdout
+            .contains("  warnings      outliers_rejected: readings far from the others"),
         "{}",
         r.stdout
     );

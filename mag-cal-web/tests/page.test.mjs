@@ -139,6 +139,12 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
     const samples = await page.textContent('[data-name="samples"]');
     assert.ok(samples.startsWith(`${cli.samples_used} used of`), samples);
 
+    // The warnings in the words of magcal's text report.
+    const report = execFileSync(MAGCAL, ['fit', file, '--precision', precision], { encoding: 'utf8', stdio: 'pipe' });
+    const sentences = [...(await page.textContent('#message')).matchAll(/Warning: ([^.]+)\./g)].map((m) => m[1]);
+    assert.equal(sentences.length, cli.quality.warnings.length, await page.textContent('#message'));
+    cli.quality.warnings.forEach((name, i) => assert.ok(report.includes(`${name}: ${sentences[i]}\n`), `${name}: ${sentences[i]}`));
+
     // The download is the CLI's JSON (but for the fit's time).
     const [download] = await Promise.all([page.waitForEvent('download'), page.click('#download')]);
     const saved = JSON.parse(readFileSync(await download.path(), 'utf8'));
