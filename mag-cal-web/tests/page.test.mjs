@@ -138,6 +138,8 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
     // The counts, as the CLI gives them.
     const samples = await page.textContent('[data-name="samples"]');
     assert.ok(samples.startsWith(`${cli.samples_used} used of`), samples);
+    const columns = await page.textContent('[data-name="columns"]');
+    assert.equal(columns, name === 'imu_gnss_1252.csv' ? 'magx,magy,magz (from the header)' : 'the first three fields');
 
     // The warnings in the words of magcal's text report.
     const report = execFileSync(MAGCAL, ['fit', file, '--precision', precision], { encoding: 'utf8', stdio: 'pipe' });
@@ -165,10 +167,16 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
   await context.close();
 });
 
-test('a refused recording shows its reason, as the CLI words it', async () => {
+test('a refused recording, dropped on the page, shows its reason as the CLI words it', async () => {
   const { page, errors, context } = await openPage();
   const file = join(REAL, 'planar_243.txt');
-  await openFile(page, file);
+  const transfer = await page.evaluateHandle((text) => {
+    const dt = new DataTransfer();
+    dt.items.add(new File([text], 'planar_243.txt', { type: 'text/plain' }));
+    return dt;
+  }, readFileSync(file, 'utf8'));
+  await page.dispatchEvent('body', 'drop', { dataTransfer: transfer });
+  await page.waitForFunction(() => document.querySelector('#verdict')?.textContent.endsWith('planar_243.txt'));
   const [code, message] = magcal(file);
   assert.equal(code, 3);
   assert.match(await page.textContent('#verdict'), /^Refused/);

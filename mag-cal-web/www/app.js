@@ -280,6 +280,7 @@ function showResult(doc, name) {
     ${figure('distortion', q.distortion, 'condition number of M; refused above 16')}
     ${figure('lack of fit', q.lack_of_fit, 'systematic misfit; refused above 0.01 when significant')}
     ${figure('outlier share', q.outlier_share, 'refused above 0.25')}
+    ${figure('columns', doc.columns)}
     ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
     ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
     </table>`;
