@@ -28,8 +28,9 @@ are ignored; names containing 'cal' are calibrated columns, never picked).
 No such triple, several, or no header: exit 2, listing the header's columns.
 MotionCal logs (lines 'Raw:ax,ay,az,gx,gy,gz,mx,my,mz', as PJRC's and
 Adafruit's calibration sketches print them; magnetometer at 10 per uT) are
-recognised by their first line: x, y, z are fields 7-9 and the accelerometer
-fields 1-3; other lines are skipped, a cut-short Raw: line is dropped.
+recognised by a Raw: line among the first ten (after a banner, say): x, y, z
+are fields 7-9 and the accelerometer fields 1-3; other lines are skipped, a
+cut-short Raw: line is dropped.
 'nan' and 'inf' are accepted and skipped by the fit (counted as dropped).
 
 Outliers (unless --plain): rows that are not finite or too large are dropped,

@@ -27,7 +27,8 @@
 //! - [`Table::columns`] says which of these rules picked the columns;
 //! - for `apply`, accelerometer columns are named by `--accel-columns` or
 //!   found in the header by their exact names ([`ACCEL_NAMES`]);
-//! - a MotionCal log (the first content line starts with `Raw:`: the
+//! - a MotionCal log (one of the first ten content lines starts with
+//!   `Raw:`, after a sketch's banner, say: the
 //!   serial output of PJRC's and Adafruit's calibration sketches,
 //!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
 //!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
@@ -238,6 +239,18 @@ pub enum Picked {
 /// The prefix of a MotionCal raw line.
 pub const MOTIONCAL_PREFIX: &str = "Raw:";
 
+/// A log is read as MotionCal's when one of its first this many content
+/// lines starts with [`MOTIONCAL_PREFIX`]: a sketch prints a banner or two
+/// first, and a saved serial log keeps them.
+pub const MOTIONCAL_SNIFF_LINES: usize = 10;
+
+/// Whether `text` is a MotionCal log ([`MOTIONCAL_SNIFF_LINES`]).
+fn is_motioncal(text: &str) -> bool {
+    content_lines(text)
+        .take(MOTIONCAL_SNIFF_LINES)
+        .any(|(_, line)| line.trim_start().starts_with(MOTIONCAL_PREFIX))
+}
+
 impl fmt::Display for ColumnsUsed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let how = match self.picked {
@@ -270,7 +283,7 @@ pub fn parse_with_accel(
     let Some((first_no, first)) = lines.next() else {
         return Err(CliError::Input(format!("{source_name}: no data rows")));
     };
-    if first.trim_start().starts_with(MOTIONCAL_PREFIX) {
+    if is_motioncal(text) {
         if columns.is_some() {
             return Err(CliError::Input(format!(
                 "{source_name}: MotionCal Raw: lines have no header: --columns does not apply"

@@ -2062,9 +2062,10 @@ fn planar_refuses_what_is_not_planar_and_bad_options() {
 fn motioncal_raw_lines_are_read() {
     // The ICM-20948 recording as a MotionCal sketch prints it: Raw: lines
     // (accelerometer, gyroscope, magnetometer), Uni: lines between them, a
-    // line cut short at the start (the serial port opened mid-line).
+    // line cut short at the start (the serial port opened mid-line), after
+    // the sketch's banner.
     let text = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
-    let mut log = String::from("Raw:0,0,81\n");
+    let mut log = String::from("Adafruit sensor calibration, ICM-20948\nRaw:0,0,81\n");
     for (i, line) in text.lines().enumerate() {
         log.push_str(&format!("Raw:10,-20,8190,1,2,3,{line}\n"));
         if i % 50 == 0 {

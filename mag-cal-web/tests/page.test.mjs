@@ -9,7 +9,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { execFileSync, spawnSync } from 'node:child_process';
-import { mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
@@ -55,6 +55,7 @@ before(async () => {
 after(async () => {
   await browser?.close();
   server?.close();
+  rmSync(scratch, { recursive: true, force: true });
 });
 
 // A page with the core loaded; console errors fail the test.
@@ -123,12 +124,15 @@ async function openFile(page, file) {
 
 test('a shared recording shows what magcal fit gives, in f64 and f32', async () => {
   const { page, errors, context } = await openPage();
+  // A MotionCal log, as a user saves a board's serial output.
+  writeFileSync(join(scratch, 'motioncal_log.txt'), rawStream(streamRows().filter((_, i) => i % 6 === 0)));
   for (const [name, precision, tol] of [
     ['icm20948_mag_300.csv', 'f64', 1e-9],
     ['imu_gnss_1252.csv', 'f64', 1e-9],
     ['mag3_raw_541.csv', 'f32', 1e-5],
+    ['motioncal_log.txt', 'f64', 1e-9],
   ]) {
-    const file = join(REAL, name);
+    const file = join(name.startsWith('motioncal') ? scratch : REAL, name);
     await page.selectOption('#precision', precision);
     await openFile(page, file);
     assert.match(await page.textContent('#verdict'), /^Calibrated/);
@@ -139,7 +143,11 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
     const samples = await page.textContent('[data-name="samples"]');
     assert.ok(samples.startsWith(`${cli.samples_used} used of`), samples);
     const columns = await page.textContent('[data-name="columns"]');
-    assert.equal(columns, name === 'imu_gnss_1252.csv' ? 'magx,magy,magz (from the header)' : 'the first three fields');
+    const expected = {
+      'imu_gnss_1252.csv': 'magx,magy,magz (from the header)',
+      'motioncal_log.txt': execFileSync(MAGCAL, ['fit', file], { encoding: 'utf8' }).match(/columns +(.*)\n/)[1],
+    };
+    assert.equal(columns, expected[name] ?? 'the first three fields');
 
     // The warnings in the words of magcal's text report.
     const report = execFileSync(MAGCAL, ['fit', file, '--precision', precision], { encoding: 'utf8', stdio: 'pipe' });
