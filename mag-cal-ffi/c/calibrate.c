@@ -175,6 +175,14 @@ int main(int argc, char **argv) {
     printf("collector: %u samples kept, %u/%u cells, %u %%%s\n", (unsigned)p.samples,
            (unsigned)p.cells_visited, (unsigned)p.cells, (unsigned)p.percent,
            p.ready ? ", ready" : "");
+    /* The visited cells' bits, one per cell counted. */
+    unsigned bits = 0;
+    for (uint64_t v = p.visited; v != 0; v &= v - 1) bits++;
+    if (bits != p.cells_visited) {
+        printf("collector: %u cells in the visited bits, %u counted\n", bits,
+               (unsigned)p.cells_visited);
+        failed = 1;
+    }
 
     /* Refusals name their cause: a device lying still. */
     int16_t still[200][3];

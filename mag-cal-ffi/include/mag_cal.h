@@ -291,6 +291,11 @@ typedef struct {
   uint8_t percent;
   // Enough to calibrate.
   bool ready;
+  // The visited cells as bits, for a display of the coverage: bit `c`
+  // is set when cell `c = band * 8 + sector` holds a stored sample (six
+  // bands of equal area from the south pole, eight sectors of longitude
+  // from +x counter-clockwise, seen from the running centre).
+  uint64_t visited;
 } MagcalProgress;
 
 #ifdef __cplusplus

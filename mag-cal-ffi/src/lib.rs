@@ -844,6 +844,11 @@ pub struct MagcalProgress {
     pub percent: u8,
     /// Enough to calibrate.
     pub ready: bool,
+    /// The visited cells as bits, for a display of the coverage: bit `c`
+    /// is set when cell `c = band * 8 + sector` holds a stored sample (six
+    /// bands of equal area from the south pole, eight sectors of longitude
+    /// from +x counter-clockwise, seen from the running centre).
+    pub visited: u64,
 }
 
 /// Sets up `c` to keep readings at least `min_angle_deg` apart in direction
@@ -923,6 +928,7 @@ pub unsafe extern "C" fn magcal_collector_progress(
         cells: to_u32(p.cells),
         percent: p.percent,
         ready: p.ready,
+        visited: p.visited,
     };
     MagcalStatus::Ok
 }

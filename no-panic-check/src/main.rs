@@ -551,6 +551,7 @@ fn ffi() {
             cells: 0,
             percent: 0,
             ready: false,
+            visited: 0,
         };
         keep(magcal_collector_progress(
             addr_of!(COLLECTOR),
