@@ -64,7 +64,7 @@ function fitFile() {
     setStatus(`Internal error in the core (please report it): ${err.message}`, 'bad');
     return;
   }
-  rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron);
+  rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron, doc.fit?.field_strength);
   showResult(doc, lastFile.name);
 }
 
@@ -162,7 +162,7 @@ function redrawLive() {
     const p = state.progress;
     if (!p) return;
     showProgress(p);
-    rawView.setPoints(state.raw, null, state.result?.fit?.hard_iron);
+    rawView.setPoints(state.raw, null, state.result?.fit?.hard_iron, state.result?.fit?.field_strength);
     // Refit as the collection grows, once it is ready.
     if (p.ready && acceptedSinceFit >= 25) fitLive(false);
   });
@@ -261,7 +261,7 @@ function showResult(doc, name) {
   if (!ok) {
     $('figures').innerHTML = doc.columns ? `<p>${doc.rows} rows from ${doc.columns}</p>` : '';
     $('norms').innerHTML = '';
-    calView.setPoints([], null, null);
+    calView.setPoints([], null, null, null);
     $('report').textContent = '';
     setStatus(doc.message, 'bad');
     return;
@@ -287,7 +287,7 @@ function showResult(doc, name) {
   $('snippet-c').textContent = doc.snippets.c;
   $('snippet-rust').textContent = doc.snippets.rust;
   $('report').textContent = doc.text;
-  calView.setPoints(doc.calibrated, doc.classes, [0, 0, 0]);
+  calView.setPoints(doc.calibrated, doc.classes, [0, 0, 0], 1);
   drawNorms(doc.norms, doc.classes);
   setStatus(state.source === 'serial' ? 'Calibrated from the board: keep turning to refine, or send it.' : 'Calibrated.', 'good');
 }
@@ -297,19 +297,24 @@ function warningText(doc) {
   return doc.warnings.map((w) => `Warning: ${w.text}.`).join(' ');
 }
 
+// The norms of the used samples set the scale (at least 0.9 to 1.1); the
+// others (a wild reading may be 100 fields away) sit clamped at the edges.
 function drawNorms(norms, classes) {
   const svg = $('norms');
-  const finite = norms.filter(Number.isFinite);
-  const lo = Math.min(0.9, ...finite);
-  const hi = Math.max(1.1, ...finite);
+  const used = norms.filter((v, i) => Number.isFinite(v) && classes[i] === 'used');
+  const lo = Math.min(0.9, ...used);
+  const hi = Math.max(1.1, ...used);
   const x = (i) => (norms.length > 1 ? (i / (norms.length - 1)) * 790 + 5 : 400);
-  const y = (v) => 215 - ((v - lo) / (hi - lo)) * 210;
+  const y = (v) => 215 - ((Math.min(Math.max(v, lo), hi) - lo) / (hi - lo)) * 210;
+  const off = norms.filter((v) => Number.isFinite(v) && (v < lo || v > hi)).length;
   const dots = norms
     .map((v, i) => (Number.isFinite(v) ? `<circle class="${classes[i].split(':')[0]}" cx="${x(i).toFixed(1)}" cy="${y(v).toFixed(1)}" r="1.6"/>` : ''))
     .join('');
   svg.innerHTML =
     `<line class="unit" x1="0" x2="800" y1="${y(1)}" y2="${y(1)}"/>` +
-    `<text x="4" y="12">${digits(hi, 3)}</text><text x="4" y="214">${digits(lo, 3)}</text>${dots}`;
+    `<text x="4" y="12">${digits(hi, 3)}</text><text x="4" y="214">${digits(lo, 3)}</text>` +
+    (off ? `<text x="796" y="12" text-anchor="end">${off} beyond the scale, at its edges</text>` : '') +
+    dots;
 }
 
 // ---- outputs ------------------------------------------------------------------

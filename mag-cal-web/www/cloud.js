@@ -57,23 +57,26 @@ export class Cloud {
   }
 
   // points: [[x, y, z], ...] (null values skipped); classes: one name per
-  // point, or null; centre: drawn at the origin (null: the midrange). The
-  // cloud is scaled to about the unit sphere for display.
-  setPoints(points, classes, centre) {
+  // point, or null; centre and radius: what is drawn at the origin and at
+  // 1 (a fit's b and field strength). Without them the cloud is centred on
+  // its midrange and scaled by the median of its points' distances, so
+  // that a few wild readings do not shrink the rest to a dot; points far
+  // off the scale leave the view.
+  setPoints(points, classes, centre, radius) {
     if (!this.renderer) return;
     const finite = points.filter((p) => p && p.every(Number.isFinite));
-    let c = centre;
-    if (!c) {
-      c = [0, 1, 2].map((k) => {
-        const v = finite.map((p) => p[k]);
-        return v.length ? (Math.min(...v) + Math.max(...v)) / 2 : 0;
+    const c =
+      centre ??
+      [0, 1, 2].map((k) => {
+        const v = finite.map((p) => p[k]).sort((a, b) => a - b);
+        return v.length ? (v[Math.floor(v.length * 0.05)] + v[Math.floor(v.length * 0.95)]) / 2 : 0;
       });
+    let r = radius;
+    if (!r) {
+      const d = finite.map((p) => Math.hypot(p[0] - c[0], p[1] - c[1], p[2] - c[2])).sort((a, b) => a - b);
+      r = d.length ? d[Math.floor(d.length / 2)] || 1 : 1;
     }
-    let extent = 0;
-    for (const p of finite) {
-      for (let k = 0; k < 3; k += 1) extent = Math.max(extent, Math.abs(p[k] - c[k]));
-    }
-    const scale = centre && centre.every((v) => v === 0) ? 1 : 1 / (extent || 1);
+    const scale = 1 / r;
     const position = [];
     const colour = [];
     const col = new THREE.Color();
