@@ -298,7 +298,7 @@ test('a Raw: stream through the serial port: progress, coverage, fit, and send t
   assert.equal(p.refused.not_finite, 1, JSON.stringify(p.refused));
   assert.equal(p.refused.glitch, 1, JSON.stringify(p.refused));
   assert.equal(p.refused.outlier, 1, JSON.stringify(p.refused));
-  assert.match(progressText, /not kept: 1 cut short or not numbers, 1 glitches \(zeros, rails\), 1 outliers/);
+  assert.match(progressText, /not kept: cut short or not numbers: 1, glitches \(zeros, rails\): 1, outliers \(far from the others\): 1/);
 
   // The final fit is magcal's fit of the samples the collector kept.
   assert.match(await page.textContent('#verdict'), /^Calibrated/);

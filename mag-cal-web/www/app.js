@@ -224,7 +224,7 @@ function showProgress(p) {
   $('progress').value = p.percent;
   const refused = Object.entries(REFUSED)
     .filter(([name]) => p.refused[name] > 0)
-    .map(([name, words]) => `${p.refused[name]} ${words}`);
+    .map(([name, words]) => `${words}: ${p.refused[name]}`);
   $('progress-text').textContent =
     `${p.percent} %: ${p.samples} samples kept of ${p.lines} Raw: lines, ` +
     `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
