@@ -38,9 +38,13 @@ use mag_cal_core::collector::{Collector, Offer, Progress};
 use mag_cal_core::{Config, Method, SampleClass, Warning};
 use serde_json::{json, Value};
 
-/// Capacity of the live collector: MotionCal keeps 650 points; 1000 at
-/// the default 4 deg spacing leaves room for a slow, thorough turn.
-pub const LIVE_CAPACITY: usize = 1000;
+/// Capacity of the live collection (24 bytes a sample). MotionCal keeps
+/// 650 points and replaces old ones; the core's collector keeps what it
+/// accepted and refuses the rest once full, so the page takes room for
+/// several minutes of slow turning (at the default 4 deg spacing, the
+/// 25 598 readings of a long real recording fill 1 000 in their first
+/// fifth).
+pub const LIVE_CAPACITY: usize = 4000;
 
 /// The options of a fit, as the page sends them (JSON object; every field
 /// optional).
@@ -331,7 +335,7 @@ fn offer_index(offer: Offer) -> usize {
 thread_local! {
     /// The last JSON document written.
     static OUT: RefCell<String> = const { RefCell::new(String::new()) };
-    /// The live collection (boxed: 24 KB of samples).
+    /// The live collection (boxed: 96 KB of samples).
     static LIVE: RefCell<Box<Live>> = RefCell::new(Box::default());
 }
 
