@@ -384,11 +384,11 @@ unsafe fn bytes<'a>(ptr: *const u8, len: usize) -> &'a [u8] {
     }
 }
 
-/// Allocates `len` bytes for the page to write an input into.
+/// Allocates `len` bytes (zeroed) for the page to write an input into.
 #[no_mangle]
 pub extern "C" fn mc_alloc(len: usize) -> *mut u8 {
-    let mut buf = std::mem::ManuallyDrop::new(Vec::<u8>::with_capacity(len.max(1)));
-    buf.as_mut_ptr()
+    // A boxed slice has exactly `len` bytes, which `mc_free` rebuilds.
+    Box::into_raw(vec![0u8; len].into_boxed_slice()).cast::<u8>()
 }
 
 /// Frees memory from [`mc_alloc`].
@@ -399,8 +399,8 @@ pub extern "C" fn mc_alloc(len: usize) -> *mut u8 {
 #[no_mangle]
 pub unsafe extern "C" fn mc_free(ptr: *mut u8, len: usize) {
     if !ptr.is_null() {
-        // SAFETY: per the function's contract (capacity len.max(1)).
-        drop(unsafe { Vec::from_raw_parts(ptr, 0, len.max(1)) });
+        // SAFETY: per the function's contract, the box `mc_alloc` made.
+        drop(unsafe { Box::from_raw(std::ptr::slice_from_raw_parts_mut(ptr, len)) });
     }
 }
 
@@ -536,6 +536,50 @@ mod tests {
         assert_eq!((code, doc["status"].as_str()), (2, Some("error")), "{text}");
         let (code, _) = fit_json(b"1,2,3\n", br#"{"precision":"f16"}"#, &|| 0.0);
         assert_eq!(code, 2);
+    }
+
+    /// The exports as the page calls them: copy in, call, read out, free.
+    #[test]
+    fn the_exports_move_bytes_in_and_out() {
+        let put = |bytes: &[u8]| {
+            let ptr = mc_alloc(bytes.len());
+            // SAFETY: `ptr` holds `bytes.len()` bytes from `mc_alloc`.
+            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), ptr, bytes.len()) };
+            ptr
+        };
+        let out = || {
+            // SAFETY: the output string, not changed until the next call.
+            let bytes = unsafe { bytes(mc_out_ptr(), mc_out_len()) };
+            serde_json::from_slice::<Value>(bytes).expect("JSON")
+        };
+        let data = csv(&ellipsoid(300));
+        let options = br#"{"precision":"f32"}"#;
+        let (d, o) = (put(&data), put(options));
+        // SAFETY: both from `mc_alloc`, with their lengths.
+        let code = unsafe { mc_fit(d, data.len(), o, options.len()) };
+        assert_eq!((code, out()["fit"]["precision"].as_str()), (0, Some("f32")));
+        // SAFETY: as allocated; an empty allocation too.
+        unsafe {
+            mc_free(d, data.len());
+            mc_free(o, options.len());
+            let empty = mc_alloc(0);
+            assert_eq!(mc_fit(empty, 0, std::ptr::null(), 0), 2);
+            mc_free(empty, 0);
+        }
+        assert_eq!(out()["status"], "error");
+
+        mc_live_reset();
+        let line = b"Raw:0,0,0,0,0,0,1,2,3";
+        let l = put(line);
+        // SAFETY: from `mc_alloc`, with its length.
+        unsafe {
+            mc_live_line(l, line.len());
+            mc_free(l, line.len());
+        }
+        assert_eq!(out()["offer"], "accepted");
+        // SAFETY: null options are the defaults.
+        assert_eq!(unsafe { mc_live_fit(std::ptr::null(), 0) }, 3);
+        assert_eq!(out()["status"], "refused");
     }
 
     #[test]
