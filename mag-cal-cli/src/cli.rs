@@ -317,6 +317,8 @@ impl StrengthArg {
     }
 }
 
+/// The largest `--window` of `apply` (headings smoothed over at most this
+/// many readings).
 pub const MAX_WINDOW: usize = 128;
 
 /// Options of `magcal apply`.

@@ -26,6 +26,8 @@
 //! output does not say so (`fit --format json`, `apply`), and one for
 //! `apply --flags` with a calibration file that has no `selection`.
 
+#![warn(missing_docs)]
+
 pub mod apply;
 pub mod cli;
 pub mod error;

@@ -23,6 +23,8 @@
 //! On the host the same functions are plain Rust ([`fit_json`], [`Live`]),
 //! which the unit tests call.
 
+#![warn(missing_docs)]
+
 pub mod packet;
 pub mod snippets;
 
