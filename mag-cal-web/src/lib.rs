@@ -15,6 +15,7 @@
 //!
 //! | export | does | JSON written |
 //! |---|---|---|
+//! | [`mc_info`] | the core's method names and coverage grid | [`info_json`] |
 //! | [`mc_fit`] | parses a file and fits it | [`fit_json`] |
 //! | [`mc_live_reset`] | empties the live collector | none |
 //! | [`mc_live_line`] | one line of a serial stream into the collector | [`Live::line`] |
@@ -44,7 +45,7 @@ use serde_json::{json, Value};
 /// 650 points and replaces old ones; the core's collector keeps what it
 /// accepted and refuses the rest once full, so the page takes room for
 /// several minutes of slow turning (at the default 4 deg spacing, the
-/// 25 598 readings of a long real recording fill 1 000 in their first
+/// 25 599 readings of a long real recording fill 1 000 in their first
 /// fifth).
 pub const LIVE_CAPACITY: usize = 4000;
 
@@ -332,6 +333,25 @@ fn offer_index(offer: Offer) -> usize {
     }
 }
 
+/// The core's names and layout for the page's controls: `methods` (names,
+/// the default first), the collector's coverage grid (`bands`, `sectors`,
+/// `cells`: cell `band * sectors + sector`, bands from the south pole,
+/// sectors of longitude from +x counter-clockwise) and `live_capacity`.
+pub fn info_json() -> Value {
+    let default = Config::default().method;
+    let methods: Vec<&str> = std::iter::once(default)
+        .chain(Method::ALL.into_iter().filter(|m| *m != default))
+        .map(Method::name)
+        .collect();
+    json!({
+        "methods": methods,
+        "bands": mag_cal_core::collector::BANDS,
+        "sectors": mag_cal_core::collector::SECTORS,
+        "cells": mag_cal_core::collector::CELLS,
+        "live_capacity": LIVE_CAPACITY,
+    })
+}
+
 // ---- the WebAssembly exports ----------------------------------------------
 
 thread_local! {
@@ -435,6 +455,12 @@ pub unsafe extern "C" fn mc_fit(
     let (code, text) = fit_json(data, options, &clock::now);
     set_out(text);
     code
+}
+
+/// What the page builds its controls from ([`info_json`]).
+#[no_mangle]
+pub extern "C" fn mc_info() {
+    set_out(info_json().to_string());
 }
 
 /// Empties the live collection.
@@ -582,6 +608,16 @@ mod tests {
         // SAFETY: null options are the defaults.
         assert_eq!(unsafe { mc_live_fit(std::ptr::null(), 0) }, 3);
         assert_eq!(out()["status"], "refused");
+    }
+
+    #[test]
+    fn the_info_names_every_method_default_first() {
+        let info = info_json();
+        let methods = info["methods"].as_array().unwrap();
+        assert_eq!(methods[0], Config::default().method.name());
+        assert_eq!(methods.len(), Method::ALL.len());
+        let (bands, sectors) = (info["bands"].as_u64().unwrap(), info["sectors"].as_u64().unwrap());
+        assert_eq!(Some(bands * sectors), info["cells"].as_u64());
     }
 
     #[test]

@@ -2,15 +2,16 @@
 // outputs. Every number shown comes from the core (core.js); this file
 // draws and formats.
 
-import { loadCore } from './core.js';
+import { loadCore, CoreRestarted } from './core.js';
 import { Cloud } from './cloud.js';
 
 const $ = (id) => document.getElementById(id);
-const METHODS = ['adc2', 'adc2-iter', 'adc1', 'ls', 'submle'];
-const BANDS = 6;
-const SECTORS = 8;
+// A line longer than this is no MotionCal line (a wrong baud rate gives
+// noise without newlines): it is dropped.
+const MAX_LINE = 4096;
 
 const core = await loadCore('./mag_cal_web.wasm');
+const info = core.info();
 const rawView = new Cloud($('raw-view'), { sphere: false });
 const calView = new Cloud($('cal-view'), { sphere: true });
 
@@ -25,7 +26,7 @@ const state = {
 state.core = core;
 window.magcal = state;
 
-for (const m of METHODS) $('method').append(new Option(m, m));
+for (const m of info.methods) $('method').append(new Option(m, m));
 buildCells();
 
 function options(name) {
@@ -61,7 +62,7 @@ function fitFile() {
   try {
     doc = core.fit(lastFile.bytes, options(lastFile.name));
   } catch (err) {
-    setStatus(`Internal error in the core (please report it): ${err.message}`, 'bad');
+    coreFailed(err);
     return;
   }
   rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron, doc.fit?.field_strength);
@@ -84,11 +85,24 @@ for (const id of ['precision', 'method', 'plain', 'columns']) {
 
 let port = null;
 let reader = null;
+let piping = null; // the current pipe from the port into the line decoder
+let session = 0; // one per connection: a stale read loop must not touch a new one
 let acceptedSinceFit = 0;
+
+// What a failed call of the core means for the page.
+function coreFailed(err) {
+  if (err instanceof CoreRestarted) {
+    state.raw = [];
+    state.progress = null;
+    setStatus(`Internal error: ${err.message}; the collection starts again (please report it).`, 'bad');
+  } else {
+    setStatus(`Internal error: ${err.message} (please report it).`, 'bad');
+  }
+}
 
 async function connect() {
   if (!('serial' in navigator)) {
-    setStatus('This browser has no WebSerial: use Chrome, Edge or another Chromium browser.', 'bad');
+    setStatus('This browser has no WebSerial: use Chrome, Edge or another Chromium browser, on https or localhost.', 'bad');
     return;
   }
   try {
@@ -99,9 +113,11 @@ async function connect() {
     port = null;
     return;
   }
+  session += 1;
   state.source = 'serial';
   state.raw = [];
   state.result = null;
+  state.streamEnded = false;
   lastFile = null;
   acceptedSinceFit = 0;
   core.liveReset();
@@ -109,34 +125,52 @@ async function connect() {
   $('connect').disabled = true;
   $('disconnect').disabled = false;
   setStatus('Connected: turn the board slowly in every direction.');
-  readLines();
+  readLines(session, port);
 }
 
-async function readLines() {
-  const decoder = new TextDecoderStream();
-  const done = port.readable.pipeTo(decoder.writable).catch(() => {});
-  reader = decoder.readable.getReader();
-  let pending = '';
-  try {
-    for (;;) {
-      const { value, done: end } = await reader.read();
-      if (end) break;
-      pending += value;
-      let nl;
-      while ((nl = pending.indexOf('\n')) >= 0) {
-        onLine(pending.slice(0, nl));
-        pending = pending.slice(nl + 1);
+// Reads lines until the stream ends, the user disconnects or a fatal error.
+// Errors the Web Serial API calls non-fatal (buffer overrun, framing,
+// parity, break) give the port a new readable stream: reading goes on.
+async function readLines(id, from) {
+  let failure = null;
+  while (id === session && from.readable) {
+    const decoder = new TextDecoderStream();
+    piping = from.readable.pipeTo(decoder.writable).catch(() => {});
+    reader = decoder.readable.getReader();
+    let pending = '';
+    let end = false;
+    try {
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) {
+          end = true;
+          break;
+        }
+        pending += value;
+        let nl;
+        while ((nl = pending.indexOf('\n')) >= 0) {
+          onLine(pending.slice(0, nl));
+          pending = pending.slice(nl + 1);
+        }
+        if (pending.length > MAX_LINE) pending = '';
+        redrawLive();
       }
-      redrawLive();
+    } catch (err) {
+      failure = err;
+    } finally {
+      reader.releaseLock();
+      reader = null;
     }
-  } catch (err) {
-    setStatus(`Serial read stopped: ${err.message}`, 'bad');
+    if (pending && id === session) onLine(pending);
+    await piping;
+    const nonFatal = ['BufferOverrunError', 'FramingError', 'ParityError', 'BreakError'];
+    if (end || !failure || !nonFatal.includes(failure.name)) break;
+    failure = null;
   }
-  if (pending) onLine(pending);
-  reader = null;
-  await done;
+  if (id !== session) return;
   fitLive(true);
   state.streamEnded = true;
+  if (failure) setStatus(`The serial port stopped: ${failure.message}`, 'bad');
 }
 
 function onLine(line) {
@@ -144,7 +178,7 @@ function onLine(line) {
   try {
     r = core.liveLine(line);
   } catch (err) {
-    setStatus(`Internal error in the core (please report it): ${err.message}`, 'bad');
+    coreFailed(err);
     return;
   }
   state.progress = r.progress;
@@ -172,23 +206,33 @@ function fitLive(force) {
   if (state.source !== 'serial' || !state.progress) return;
   if (!force && !state.progress.ready) return;
   acceptedSinceFit = 0;
-  const doc = core.liveFit(options('serial'));
+  let doc;
+  try {
+    doc = core.liveFit(options('serial'));
+  } catch (err) {
+    coreFailed(err);
+    return;
+  }
   if (doc.status === 'ok' || force) showResult(doc, 'serial');
 }
 
+// Disconnect: the read loop ends (and fits what it has), the pipe lets go
+// of the port's stream, then the port closes.
 async function stopSerial() {
   if (!port) return;
+  const closing = port;
+  port = null;
   try {
     await reader?.cancel();
   } catch (_) {
-    /* already closed */
+    /* already ended */
   }
+  await piping;
   try {
-    await port.close();
-  } catch (_) {
-    /* the stream may still hold it */
+    await closing.close();
+  } catch (err) {
+    setStatus(`The port did not close: ${err.message}`, 'bad');
   }
-  port = null;
   $('connect').disabled = false;
   $('disconnect').disabled = true;
   $('send').disabled = true;
@@ -196,17 +240,27 @@ async function stopSerial() {
 
 $('connect').addEventListener('click', connect);
 $('disconnect').addEventListener('click', stopSerial);
+// A board unplugged: its port goes away.
+navigator.serial?.addEventListener?.('disconnect', (e) => {
+  if (e.target === port) stopSerial();
+});
 
 // ---- coverage ---------------------------------------------------------------
 
 function buildCells() {
   const grid = $('cells');
   // North (band 5) at the top; sectors of longitude left to right.
-  for (let band = BANDS - 1; band >= 0; band -= 1) {
-    for (let sector = 0; sector < SECTORS; sector += 1) {
+  grid.style.gridTemplateColumns = `repeat(${info.sectors}, 1.4rem)`;
+  $('cells-hint').textContent =
+    `The core's collector (up to ${info.live_capacity} samples): ${info.cells} cells of equal area, ` +
+    `${info.bands} bands of latitude (north at the top) by ${info.sectors} sectors of longitude, ` +
+    'blue once a kept sample points into one.';
+  const width = 360 / info.sectors;
+  for (let band = info.bands - 1; band >= 0; band -= 1) {
+    for (let sector = 0; sector < info.sectors; sector += 1) {
       const cell = document.createElement('div');
-      cell.dataset.cell = band * SECTORS + sector;
-      cell.title = `band ${band}, sector ${sector * 45}-${sector * 45 + 45} deg`;
+      cell.dataset.cell = band * info.sectors + sector;
+      cell.title = `band ${band} from the south, longitude ${sector * width}-${(sector + 1) * width} deg`;
       grid.append(cell);
     }
   }
@@ -331,15 +385,20 @@ $('copy-c').addEventListener('click', () => navigator.clipboard.writeText(state.
 $('copy-rust').addEventListener('click', () => navigator.clipboard.writeText(state.result.snippets.rust));
 $('send').addEventListener('click', async () => {
   if (!port?.writable || state.result?.status !== 'ok') return;
-  const writer = port.writable.getWriter();
+  $('send').disabled = true;
   try {
-    await writer.write(new Uint8Array(state.result.packet));
+    const writer = port.writable.getWriter();
+    try {
+      await writer.write(new Uint8Array(state.result.packet));
+    } finally {
+      writer.releaseLock();
+    }
     state.sent += 1;
-    $('send-status').textContent = 'Sent MotionCal\'s 68-byte packet (units: 10 counts per uT).';
+    $('send-status').textContent = "Sent MotionCal's 68-byte packet (units: 10 counts per uT).";
   } catch (err) {
     $('send-status').textContent = `Not sent: ${err.message}`;
   } finally {
-    writer.releaseLock();
+    $('send').disabled = !port;
   }
 });
 
