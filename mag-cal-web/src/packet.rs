@@ -89,6 +89,61 @@ mod tests {
         assert_eq!(crc16(b"123456789"), 0x4B37);
     }
 
+    /// What a board does with the packet (Adafruit_Sensor_Calibration:
+    /// `invW (raw_uT - V)`, whose length should be `B`), on the samples of
+    /// a fit in MotionCal's units.
+    #[test]
+    fn the_board_gets_the_field_strength_back() {
+        let rows: Vec<[f64; 3]> = (0..400)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / 400.0;
+                let r = (1.0 - z * z).sqrt();
+                let phi = i as f64 * 2.399_963;
+                let h = [r * phi.cos(), r * phi.sin(), z];
+                [
+                    -120.0 + 410.0 * h[0] + 30.0 * h[1],
+                    250.0 + 380.0 * h[1],
+                    75.0 + 450.0 * h[2] - 20.0 * h[0],
+                ]
+            })
+            .collect();
+        let o = mag_cal_cli::fit::fit(
+            &rows,
+            &mag_cal_core::Config::default(),
+            mag_cal_cli::cli::Precision::F64,
+        )
+        .expect("fits");
+        let packet = from_outcome(&o);
+        assert_eq!(packet[..2], SIGNATURE);
+        assert_eq!(crc16(&packet), 0);
+        let f = |i: usize| {
+            let at = 2 + 4 * i;
+            f64::from(f32::from_le_bytes([
+                packet[at],
+                packet[at + 1],
+                packet[at + 2],
+                packet[at + 3],
+            ]))
+        };
+        assert!((0..6).all(|i| f(i) == 0.0));
+        let (v, b) = ([f(6), f(7), f(8)], f(9));
+        let s = [
+            [f(10), f(13), f(14)],
+            [f(13), f(11), f(15)],
+            [f(14), f(15), f(12)],
+        ];
+        assert!((b - o.field_strength / COUNTS_PER_UT).abs() < 1e-4 * b);
+        for y in &rows {
+            let d: Vec<f64> = (0..3).map(|k| y[k] / COUNTS_PER_UT - v[k]).collect();
+            let m: Vec<f64> = s
+                .iter()
+                .map(|row| row[0] * d[0] + row[1] * d[1] + row[2] * d[2])
+                .collect();
+            let norm = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+            assert!((norm / b - 1.0).abs() < 1e-5, "{norm} against {b}");
+        }
+    }
+
     #[test]
     fn a_whole_packet_checks_to_zero() {
         let mut packet = [0u8; LEN];

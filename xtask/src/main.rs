@@ -258,9 +258,10 @@ fn test_all() -> Result<(), String> {
     run(&fw, "cargo", &["build", "--release", "--locked"])?;
     qemu_demo()?;
     qemu_faults()?;
+    // The calibration page in headless Chromium.
+    web_tests()?;
     // The link proof that no panic path is reachable from the core's API
     // (docs/robustness.md).
-    web_tests()?;
     let proof = root().join("no-panic-check").join("check.sh");
     let proof = proof.to_str().ok_or("check.sh: path is not UTF-8")?;
     run(&root(), "bash", &[proof, "--no-list"])
