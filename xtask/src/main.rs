@@ -3,10 +3,10 @@
 //!
 //! | command | what |
 //! |---|---|
-//! | `setup` | install what a fresh machine lacks: the thumb target (through `rustup toolchain install`), `qemu-system-arm`, `gcc-arm-none-eabi` and `libnewlib-arm-none-eabi` (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
+//! | `setup` | install what a fresh machine lacks: the thumb and wasm targets (rustup), `qemu-system-arm`, `gcc-arm-none-eabi`, `libnewlib-arm-none-eabi`, `chromium`, and `nodejs` with `npm` when npm is missing (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
-//! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run and the no-panic link proof (`no-panic-check/check.sh`) |
+//! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run, the page's browser tests (`web-test`) and the no-panic link proof (`no-panic-check/check.sh`) |
 //! | `header` | regenerate the C header `mag-cal-ffi/include/mag_cal.h` with cbindgen |
 //! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
