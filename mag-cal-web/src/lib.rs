@@ -616,7 +616,10 @@ mod tests {
         let methods = info["methods"].as_array().unwrap();
         assert_eq!(methods[0], Config::default().method.name());
         assert_eq!(methods.len(), Method::ALL.len());
-        let (bands, sectors) = (info["bands"].as_u64().unwrap(), info["sectors"].as_u64().unwrap());
+        let (bands, sectors) = (
+            info["bands"].as_u64().unwrap(),
+            info["sectors"].as_u64().unwrap(),
+        );
         assert_eq!(Some(bands * sectors), info["cells"].as_u64());
     }
 
