@@ -13,6 +13,7 @@ import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'nod
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
+import { fileURLToPath } from 'node:url';
 import { serve } from '../serve.mjs';
 
 const env = (name) => {
@@ -26,6 +27,8 @@ const REAL = env('REAL_DATA');
 const SHOTS = env('SCREENSHOTS');
 mkdirSync(SHOTS, { recursive: true });
 const scratch = mkdtempSync(join(tmpdir(), 'mag-cal-web-'));
+// The C API's header, for the C snippet.
+const HEADER_DIR = fileURLToPath(new URL('../../mag-cal-ffi/include', import.meta.url));
 
 let server;
 let browser;
@@ -165,6 +168,16 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
     const calFile = join(scratch, `${name}.json`);
     writeFileSync(calFile, JSON.stringify(saved));
     execFileSync(MAGCAL, ['apply', calFile, file], { encoding: 'utf8', stdio: 'pipe' });
+
+    // The C snippet compiles against the C API's header and calls it.
+    const snippet = await page.evaluate(() => window.magcal.result.snippets.c);
+    const cFile = join(scratch, 'snippet.c');
+    writeFileSync(cFile, `${snippet}\nint main(void) {\n    float raw[3] = { 1, 2, 3 }, out[3];\n    return (int)magcal_apply(&mag_calibration, raw, out);\n}\n`);
+    execFileSync('gcc', ['-std=c99', '-Wall', '-Wextra', '-Werror', '-fsyntax-only', '-I', HEADER_DIR, cFile], { stdio: 'pipe' });
+    // Its numbers are the fit's, to the last digit.
+    for (const v of [...cli.hard_iron, ...cli.soft_iron.flat(), cli.field_strength]) {
+      assert.ok(snippet.includes(String(v)) || snippet.includes(v.toExponential()), `${v} in the C snippet`);
+    }
 
     // The norm plot has a dot per finite sample.
     const dots = await page.locator('#norms circle').count();
