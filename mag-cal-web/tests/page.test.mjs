@@ -27,8 +27,31 @@ const REAL = env('REAL_DATA');
 const SHOTS = env('SCREENSHOTS');
 mkdirSync(SHOTS, { recursive: true });
 const scratch = mkdtempSync(join(tmpdir(), 'mag-cal-web-'));
-// The C API's header, for the C snippet.
-const HEADER_DIR = fileURLToPath(new URL('../../mag-cal-ffi/include', import.meta.url));
+// The repository, for the snippets' checks.
+const ROOT = fileURLToPath(new URL('../..', import.meta.url));
+const HEADER_DIR = join(ROOT, 'mag-cal-ffi', 'include');
+
+// `cargo check` of the Rust snippet in a crate of its own that depends on
+// this repository's mag-cal-core (offline: the workspace's lock file and
+// toolchain, its dependencies already fetched).
+function checkRustSnippet(snippet) {
+  const dir = join(scratch, 'snippet-rs');
+  mkdirSync(join(dir, 'src'), { recursive: true });
+  writeFileSync(
+    join(dir, 'Cargo.toml'),
+    `[package]\nname = "snippet"\nversion = "0.0.0"\nedition = "2021"\n\n` +
+      `[dependencies]\nmag-cal-core = { path = ${JSON.stringify(join(ROOT, 'mag-cal-core'))} }\n\n[workspace]\n`,
+  );
+  writeFileSync(join(dir, 'Cargo.lock'), readFileSync(join(ROOT, 'Cargo.lock')));
+  writeFileSync(join(dir, 'rust-toolchain.toml'), readFileSync(join(ROOT, 'rust-toolchain.toml')));
+  writeFileSync(
+    join(dir, 'src', 'lib.rs'),
+    `#![deny(warnings)]\n${snippet}\npub fn unit() -> Result<[f32; 3], Error> {\n    Ok(calibration()?.apply([1i16, 2, 3]))\n}\n`,
+  );
+  const env = { ...process.env, CARGO_TARGET_DIR: join(ROOT, 'target', 'snippet-check') };
+  const run = spawnSync('cargo', ['check', '--offline', '--quiet'], { cwd: dir, env, encoding: 'utf8' });
+  assert.equal(run.status, 0, `the Rust snippet does not build:\n${run.stderr}`);
+}
 
 let server;
 let browser;
@@ -177,6 +200,10 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
     // Its numbers are the fit's, to the last digit.
     for (const v of [...cli.hard_iron, ...cli.soft_iron.flat(), cli.field_strength]) {
       assert.ok(snippet.includes(String(v)) || snippet.includes(v.toExponential()), `${v} in the C snippet`);
+    }
+
+    if (name === 'icm20948_mag_300.csv') {
+      checkRustSnippet(await page.evaluate(() => window.magcal.result.snippets.rust));
     }
 
     // The norm plot has a dot per finite sample.
