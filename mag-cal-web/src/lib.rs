@@ -37,7 +37,7 @@ use mag_cal_cli::fit::{fit_timed, Outcome};
 use mag_cal_cli::input;
 use mag_cal_cli::output;
 use mag_cal_cli::selection::class_name;
-use mag_cal_core::collector::{Collector, Offer, Progress};
+use mag_cal_core::collector::{Collector, Offer, Progress, OUTLIER_MIN_SAMPLES};
 use mag_cal_core::{Config, Method, SampleClass, Warning};
 use serde_json::{json, Value};
 
@@ -222,7 +222,30 @@ pub struct Live {
     /// The collector's refusals, by [`OFFER_NAMES`] (index 0, accepted,
     /// unused).
     refused: [usize; OFFER_NAMES.len()],
+    /// `Raw:` lines in a row that stall the collector ([`RESTART_AFTER`]).
+    stuck: usize,
+    /// Restarts of the collection ([`RESTART_AFTER`]).
+    restarts: usize,
+    /// Samples the restarts discarded.
+    discarded: usize,
 }
+
+/// The collection starts again after this many `Raw:` lines in a row
+/// that the collector cannot use although they are readings: refused as
+/// too close while it holds fewer than [`OUTLIER_MIN_SAMPLES`] samples, or
+/// refused as outliers. Both are the collector stalled for good (the
+/// core's [`Collector`] has no such recovery yet):
+/// - a wild first reading (a sensor's start-up value, 30 000 counts off)
+///   puts its running centre so far away that every later reading points
+///   the same way from it and is too close;
+/// - a board lying still when the collection starts gives 20 samples of a
+///   noise ball, whose radius is the noise: every reading of the board
+///   turning is then more than 3 such radii away, an outlier.
+///
+/// A board that lies still restarts it too, at no loss (it holds one
+/// sample); a magnet held at the sensor for as many readings restarts it
+/// twice (on the magnet, and when it is gone).
+pub const RESTART_AFTER: usize = 100;
 
 /// The names of the collector's answers, as [`Live::line`] gives them.
 pub const OFFER_NAMES: [&str; 7] = [
@@ -251,7 +274,20 @@ impl Live {
                 .ok()
                 .and_then(|t| t.samples.first().copied())
                 .unwrap_or([f64::NAN; 3]);
-            let offer = offer_index(self.collector.offer(sample));
+            if self.stuck >= RESTART_AFTER {
+                self.discarded += self.collector.len();
+                self.collector.clear();
+                self.restarts += 1;
+                self.stuck = 0;
+            }
+            let answer = self.collector.offer(sample);
+            let stalled = match answer {
+                Offer::TooClose => self.collector.len() < OUTLIER_MIN_SAMPLES,
+                Offer::Outlier => true,
+                _ => false,
+            };
+            self.stuck = if stalled { self.stuck + 1 } else { 0 };
+            let offer = offer_index(answer);
             if let Some(n) = self.refused.get_mut(offer).filter(|_| offer > 0) {
                 *n += 1;
             }
@@ -268,9 +304,11 @@ impl Live {
     /// `percent`, `ready`, `visited` (one flag per cell, cell
     /// `band * 8 + sector`: six bands of equal area from the south pole,
     /// eight sectors of longitude from +x counter-clockwise), the stream's
-    /// `lines` and `skipped`, and `refused`: the collector's refusals by
-    /// name (`too_close`, `not_finite`: a cut-short line, `full`, `glitch`,
-    /// `outlier`).
+    /// `lines` and `skipped`, `refused`: the collector's refusals by name
+    /// (`too_close`, `not_finite`: a cut-short line, `full`, `glitch`,
+    /// `outlier`), and the collection's `restarts` with the samples they
+    /// `discarded` ([`RESTART_AFTER`]). Every `Raw:` line is counted once:
+    /// `lines = samples + discarded + sum(refused)`.
     pub fn progress_json(&self) -> Value {
         let p: Progress = self.collector.progress();
         let visited: Vec<bool> = (0..p.cells).map(|c| (p.visited >> c) & 1 == 1).collect();
@@ -283,6 +321,8 @@ impl Live {
             "visited": visited,
             "lines": self.lines,
             "skipped": self.skipped,
+            "restarts": self.restarts,
+            "discarded": self.discarded,
             "refused": OFFER_NAMES
                 .iter()
                 .zip(self.refused)
@@ -641,6 +681,18 @@ mod tests {
             (p["lines"].as_u64(), p["skipped"].as_u64()),
             (Some(801), Some(1))
         );
+        assert_eq!(p["refused"]["not_finite"], 1, "{p}");
+        let refused: u64 = p["refused"]
+            .as_object()
+            .unwrap()
+            .values()
+            .filter_map(Value::as_u64)
+            .sum();
+        assert_eq!(refused + p["samples"].as_u64().unwrap(), 801, "{p}");
+        assert_eq!(
+            (p["restarts"].as_u64(), p["discarded"].as_u64()),
+            (Some(0), Some(0))
+        );
         let visited = p["visited"].as_array().unwrap();
         let seen = visited.iter().filter(|v| v.as_bool() == Some(true)).count();
         assert_eq!(Some(seen as u64), p["cells_visited"].as_u64());
@@ -649,5 +701,64 @@ mod tests {
         let doc: Value = serde_json::from_str(&text).unwrap();
         let b = doc["fit"]["hard_iron"][0].as_f64().unwrap();
         assert!((b - 120.0).abs() < 1.0, "{b}");
+    }
+
+    /// A board lying still when the collection starts gives a noise ball,
+    /// whose radius would make every later reading an outlier; the
+    /// collection starts again once the board turns.
+    #[test]
+    fn a_board_lying_still_at_first_does_not_stall_the_collection() {
+        let mut live = Live::default();
+        let sphere = ellipsoid(800);
+        let still = sphere[0];
+        for k in 0..60 {
+            // Noise of a few counts about one reading.
+            let n = [
+                (k * 7 % 5) as f64 - 2.0,
+                (k * 3 % 7) as f64 - 3.0,
+                (k % 3) as f64 - 1.0,
+            ];
+            let line = format!(
+                "Raw:0,0,0,0,0,0,{},{},{}",
+                still[0] + n[0],
+                still[1] + n[1],
+                still[2] + n[2]
+            );
+            let _ = live.line(line.as_bytes());
+        }
+        for r in &sphere {
+            let line = format!("Raw:0,0,0,0,0,0,{},{},{}", r[0], r[1], r[2]);
+            let _ = live.line(line.as_bytes());
+        }
+        let p = live.progress_json();
+        assert_eq!(p["ready"], true, "{p}");
+        assert!(p["restarts"].as_u64() >= Some(1), "{p}");
+        let (code, text) = live.fit(b"", &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+    }
+
+    /// A wild first reading would stall the collector; the collection
+    /// starts again and then fills as usual.
+    #[test]
+    fn a_wild_first_reading_does_not_stall_the_collection() {
+        let mut live = Live::default();
+        let _ = live.line(b"Raw:0,0,0,0,0,0,0,0,32767");
+        for r in ellipsoid(800) {
+            let line = format!("Raw:0,0,0,0,0,0,{},{},{}", r[0], r[1], r[2]);
+            let _ = live.line(line.as_bytes());
+        }
+        let p = live.progress_json();
+        assert_eq!(p["ready"], true, "{p}");
+        assert_eq!(p["restarts"], 1, "{p}");
+        let refused: u64 = p["refused"]
+            .as_object()
+            .unwrap()
+            .values()
+            .filter_map(Value::as_u64)
+            .sum();
+        let held = p["samples"].as_u64().unwrap() + p["discarded"].as_u64().unwrap();
+        assert_eq!(refused + held, 801, "{p}");
+        let (code, text) = live.fit(b"", &|| 0.0);
+        assert_eq!(code, 0, "{text}");
     }
 }

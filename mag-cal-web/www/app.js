@@ -282,7 +282,10 @@ function showProgress(p) {
   $('progress-text').textContent =
     `${p.percent} %: ${p.samples} samples kept of ${p.lines} Raw: lines, ` +
     `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
-    (refused.length ? `; not kept: ${refused.join(', ')}` : '');
+    (refused.length ? `; not kept: ${refused.join(', ')}` : '') +
+    (p.restarts
+      ? `; restarts: ${p.restarts} (a wild first reading, or the board lying still; ${p.discarded} samples discarded)`
+      : '');
   for (const cell of $('cells').children) {
     cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
   }
