@@ -477,8 +477,9 @@ pub enum Format {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Columns(pub [String; 3]);
 
-/// Parses `X,Y,Z` into three non-empty, trimmed names.
-fn parse_columns(text: &str) -> Result<Columns, String> {
+/// Parses `X,Y,Z` into three non-empty, trimmed names (the message says
+/// what is expected).
+pub fn parse_columns(text: &str) -> Result<Columns, String> {
     let names: Vec<String> = text.split(',').map(|s| s.trim().to_owned()).collect();
     match <[String; 3]>::try_from(names) {
         Ok(names) if names.iter().all(|n| !n.is_empty()) => Ok(Columns(names)),

@@ -31,10 +31,10 @@ pub mod snippets;
 
 use std::cell::RefCell;
 
-use mag_cal_cli::cli::{Columns, Precision};
+use mag_cal_cli::cli::{parse_columns, Columns, Precision};
 use mag_cal_cli::error::CliError;
 use mag_cal_cli::fit::{fit_timed, Outcome};
-use mag_cal_cli::input;
+use mag_cal_cli::input::{self, ColumnsUsed, Picked};
 use mag_cal_cli::output;
 use mag_cal_cli::selection::class_name;
 use mag_cal_core::collector::{Collector, Offer, Progress, OUTLIER_MIN_SAMPLES};
@@ -88,13 +88,7 @@ impl Options {
             .ok_or_else(|| bad(&format!("no method {method_name:?}")))?;
         let columns = match value["columns"].as_str() {
             None | Some("") => None,
-            Some(text) => {
-                let names: Vec<String> = text.split(',').map(|s| s.trim().to_owned()).collect();
-                match <[String; 3]>::try_from(names) {
-                    Ok(names) if names.iter().all(|n| !n.is_empty()) => Some(Columns(names)),
-                    _ => return Err(bad("columns: expected three names, e.g. magx,magy,magz")),
-                }
-            }
+            Some(text) => Some(parse_columns(text).map_err(|e| bad(&format!("columns: {e}")))?),
         };
         Ok(Options {
             name,
@@ -136,7 +130,7 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
         Ok(parsed) => parsed,
         Err(err) => return failure(&err, json!({})),
     };
-    let mut doc = json!({
+    let doc = json!({
         "columns": table.columns.to_string(),
         "rows": table.samples.len(),
         "raw": table.samples,
@@ -147,10 +141,7 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
             let columns = table.columns.to_string();
             success(&o, samples, &options.name, &columns, doc)
         }
-        Err(err) => {
-            doc["rows"] = json!(samples.len());
-            failure(&err, doc)
-        }
+        Err(err) => failure(&err, doc),
     }
 }
 
@@ -291,7 +282,7 @@ impl Live {
             if let Some(n) = self.refused.get_mut(offer).filter(|_| offer > 0) {
                 *n += 1;
             }
-            json!({ "kind": "raw", "sample": sample, "offer": OFFER_NAMES[offer % OFFER_NAMES.len()] })
+            json!({ "kind": "raw", "sample": sample, "offer": OFFER_NAMES.get(offer) })
         } else {
             self.skipped += 1;
             json!({ "kind": "skipped" })
@@ -339,19 +330,18 @@ impl Live {
             Err(err) => return failure(&err, json!({})),
         };
         let samples = self.collector.samples();
+        let columns = ColumnsUsed {
+            names: None,
+            picked: Picked::MotionCal,
+        }
+        .to_string();
         let mut doc = json!({
-            "columns": "Raw: fields 7-9 (MotionCal)",
+            "columns": columns,
             "rows": samples.len(),
             "raw": samples,
         });
         match fit_timed(samples, &options.config(), options.precision, now_us) {
-            Ok(o) => success(
-                &o,
-                samples,
-                &options.name,
-                "Raw: fields 7-9 (MotionCal)",
-                doc,
-            ),
+            Ok(o) => success(&o, samples, &options.name, &columns, doc),
             Err(err) => {
                 doc["progress"] = self.progress_json();
                 failure(&err, doc)
@@ -555,6 +545,21 @@ mod tests {
             .collect()
     }
 
+    /// Each row as a MotionCal `Raw:` line into `live`.
+    fn feed(live: &mut Live, rows: &[[f64; 3]]) {
+        for r in rows {
+            let line = format!("Raw:0,0,0,0,0,0,{},{},{}\r", r[0], r[1], r[2]);
+            let _ = live.line(line.as_bytes());
+        }
+    }
+
+    /// The collector's refusals of a progress document, all reasons.
+    fn refused_total(p: &Value) -> u64 {
+        p["refused"]
+            .as_object()
+            .map_or(0, |m| m.values().filter_map(Value::as_u64).sum())
+    }
+
     fn csv(rows: &[[f64; 3]]) -> Vec<u8> {
         rows.iter()
             .map(|r| format!("{},{},{}\n", r[0], r[1], r[2]))
@@ -671,10 +676,7 @@ mod tests {
         assert_eq!(banner["kind"], "skipped");
         let cut: Value = serde_json::from_str(&live.line(b"Raw:1,2,3,4,5,6,7")).unwrap();
         assert_eq!(cut["offer"], "not_finite");
-        for r in ellipsoid(800) {
-            let line = format!("Raw:0,0,0,0,0,0,{},{},{}\r", r[0], r[1], r[2]);
-            let _ = live.line(line.as_bytes());
-        }
+        feed(&mut live, &ellipsoid(800));
         let p = live.progress_json();
         assert_eq!(p["ready"], true, "{p}");
         assert_eq!(
@@ -682,12 +684,7 @@ mod tests {
             (Some(801), Some(1))
         );
         assert_eq!(p["refused"]["not_finite"], 1, "{p}");
-        let refused: u64 = p["refused"]
-            .as_object()
-            .unwrap()
-            .values()
-            .filter_map(Value::as_u64)
-            .sum();
+        let refused = refused_total(&p);
         assert_eq!(refused + p["samples"].as_u64().unwrap(), 801, "{p}");
         assert_eq!(
             (p["restarts"].as_u64(), p["discarded"].as_u64()),
@@ -726,10 +723,7 @@ mod tests {
             );
             let _ = live.line(line.as_bytes());
         }
-        for r in &sphere {
-            let line = format!("Raw:0,0,0,0,0,0,{},{},{}", r[0], r[1], r[2]);
-            let _ = live.line(line.as_bytes());
-        }
+        feed(&mut live, &sphere);
         let p = live.progress_json();
         assert_eq!(p["ready"], true, "{p}");
         assert!(p["restarts"].as_u64() >= Some(1), "{p}");
@@ -743,19 +737,11 @@ mod tests {
     fn a_wild_first_reading_does_not_stall_the_collection() {
         let mut live = Live::default();
         let _ = live.line(b"Raw:0,0,0,0,0,0,0,0,32767");
-        for r in ellipsoid(800) {
-            let line = format!("Raw:0,0,0,0,0,0,{},{},{}", r[0], r[1], r[2]);
-            let _ = live.line(line.as_bytes());
-        }
+        feed(&mut live, &ellipsoid(800));
         let p = live.progress_json();
         assert_eq!(p["ready"], true, "{p}");
         assert_eq!(p["restarts"], 1, "{p}");
-        let refused: u64 = p["refused"]
-            .as_object()
-            .unwrap()
-            .values()
-            .filter_map(Value::as_u64)
-            .sum();
+        let refused = refused_total(&p);
         let held = p["samples"].as_u64().unwrap() + p["discarded"].as_u64().unwrap();
         assert_eq!(refused + held, 801, "{p}");
         let (code, text) = live.fit(b"", &|| 0.0);
