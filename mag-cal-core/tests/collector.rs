@@ -1,7 +1,7 @@
 //! The on-device collector: acceptance, coverage, readiness, capacity.
 
 use mag_cal_core::collector::{
-    Collector, Offer, CELLS, DEFAULT_MIN_ANGLE_DEG, READY_CELLS, READY_SAMPLES,
+    Collector, Offer, CELLS, DEFAULT_MIN_ANGLE_DEG, READY_CELLS, READY_SAMPLES, STALL_OFFERS,
 };
 use mag_cal_core::{calibrate, Config};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -470,4 +470,147 @@ fn wild_readings_and_glitches_are_refused() {
         calibrate::<f32, _>(clean.samples(), &Config::default()).unwrap(),
     );
     assert_eq!(a.calibration, b.calibration);
+}
+
+/// Offers every direction and counts the collector's restarts.
+fn restarts<const N: usize>(
+    collector: &mut Collector<[i16; 3], N>,
+    sensor: &mut Sensor,
+    dirs: &[Vector3<f64>],
+) -> usize {
+    dirs.iter()
+        .filter(|h| collector.offer(sensor.read(h)) == Offer::Restarted)
+        .count()
+}
+
+/// Hard-iron error of a calibration of what the collector kept, relative
+/// to the field.
+fn hard_iron_error<const N: usize>(collector: &Collector<[i16; 3], N>, sensor: &Sensor) -> f64 {
+    let fit = calibrate::<f32, _>(collector.samples(), &Config::default()).unwrap();
+    let b = Vector3::from(fit.calibration.hard_iron()).cast::<f64>();
+    (b - sensor.b).norm() / sensor.rho
+}
+
+#[test]
+fn clean_motion_never_restarts() {
+    // Fast and slow turns (0.25 and 0.002 rad of longitude a reading: the
+    // slow one adds a sample only every 30-60 readings at first), bands and
+    // caps: no stall, no restart.
+    let cases = [
+        ("sphere", spiral(1.0, -1.0, 900, 0.25)),
+        ("slow sphere", spiral(1.0, -1.0, 30_000, 0.002)),
+        ("band", spiral(0.5, -0.5, 900, 0.25)),
+        ("cap", spiral(1.0, 0.3, 900, 0.25)),
+        ("slow cap", spiral(1.0, 0.6, 20_000, 0.002)),
+    ];
+    for soft_iron in [false, true] {
+        for (name, dirs) in &cases {
+            let mut sensor = Sensor::new(soft_iron);
+            let mut c: Collector<[i16; 3], 1000> = Collector::default();
+            assert_eq!(restarts(&mut c, &mut sensor, dirs), 0, "{name}");
+            assert!(c.len() >= READY_SAMPLES, "{name}: {}", c.len());
+        }
+    }
+}
+
+/// A device lying still when the collection starts stores a noise ball
+/// (its noise points every way from the crude first centre); once it turns,
+/// every reading is an outlier of that ball, and the collection starts over
+/// and then fills as usual.
+#[test]
+fn a_device_lying_still_at_first_does_not_stall_the_collection() {
+    for still in [30, 300] {
+        let mut sensor = Sensor::new(true);
+        let h = Vector3::new(0.3, -0.5, 0.8).normalize();
+        let mut c: Collector<[i16; 3], 1000> = Collector::default();
+        assert_eq!(restarts(&mut c, &mut sensor, &vec![h; still]), 0);
+        let ball = c.len();
+        // Every way from the crude centre: most of the noise is stored.
+        assert!(ball > still / 3, "{ball} of {still}");
+        assert!(calibrate::<f32, _>(c.samples(), &Config::default()).is_err());
+        let n = restarts(&mut c, &mut sensor, &spiral(1.0, -1.0, 900, 0.25));
+        let p = c.progress();
+        println!("still {still}: ball {ball}, {n} restart(s), {p:?}");
+        assert_eq!(n, 1);
+        assert!(p.ready, "{p:?}");
+        let e = hard_iron_error(&c, &sensor);
+        assert!(e < 0.005, "{e}");
+    }
+}
+
+/// A wild reading among the first samples (a start-up value) drags the
+/// running centre before any outlier test applies; the collection starts
+/// over, at most once, and then fills as usual.
+#[test]
+fn a_wild_reading_among_the_first_does_not_stall_the_collection() {
+    let dirs = spiral(1.0, -1.0, 900, 0.25);
+    for at in 0..20 {
+        for wild in [
+            [25_000, -20_000, 31_000],
+            [0, 0, -30_000],
+            [-400, 9_000, 240],
+        ] {
+            let mut sensor = Sensor::new(true);
+            let mut c: Collector<[i16; 3], 1000> = Collector::default();
+            let mut n = restarts(&mut c, &mut sensor, &dirs[..at]);
+            if c.offer(wild) == Offer::Restarted {
+                n += 1;
+            }
+            n += restarts(&mut c, &mut sensor, &dirs[at..]);
+            let p = c.progress();
+            assert!(n <= 1, "wild {wild:?} at {at}: {n} restarts");
+            assert!(p.ready, "wild {wild:?} at {at}: {p:?}");
+            assert!(!c.samples().contains(&wild), "wild {wild:?} at {at}");
+            let e = hard_iron_error(&c, &sensor);
+            assert!(e < 0.005, "wild {wild:?} at {at}: {e}");
+        }
+    }
+}
+
+/// A magnet held at the sensor for longer than STALL_OFFERS readings does
+/// not discard a collection that holds more samples than that; the sensor
+/// moved to a new place (another hard iron) restarts a small one.
+#[test]
+fn a_long_disturbance_restarts_only_a_small_collection() {
+    let dirs = spiral(1.0, -1.0, 900, 0.25);
+    let mut sensor = Sensor::new(true);
+    let mut c: Collector<[i16; 3], 1000> = Collector::default();
+    assert_eq!(restarts(&mut c, &mut sensor, &dirs[..600]), 0);
+    let kept = c.len();
+    assert!(kept > 2 * STALL_OFFERS, "{kept}");
+    // A magnet at the sensor: readings 10 fields off, for 2 STALL_OFFERS.
+    let magnet = sensor.b + Vector3::new(3200.0, 0.0, 0.0);
+    let near = sensor.b;
+    sensor.b = magnet;
+    let held = vec![Vector3::x(); 2 * STALL_OFFERS];
+    assert_eq!(restarts(&mut c, &mut sensor, &held), 0);
+    assert_eq!(c.len(), kept);
+    sensor.b = near;
+    assert_eq!(restarts(&mut c, &mut sensor, &dirs[600..]), 0);
+    assert!(c.is_ready());
+
+    // A small collection (50 samples), then the sensor mounted elsewhere:
+    // the new hard iron makes every reading an outlier; after STALL_OFFERS
+    // of them the collection starts over, and collects the new place.
+    let mut c: Collector<[i16; 3], 1000> = Collector::default();
+    let mut sensor = Sensor::new(true);
+    let mut k = 0;
+    while c.len() < 50 {
+        c.offer(sensor.read(&dirs[k]));
+        k += 1;
+    }
+    sensor.b += Vector3::new(-2500.0, 1500.0, 2000.0);
+    let answers: Vec<Offer> = dirs[k..k + STALL_OFFERS]
+        .iter()
+        .map(|h| c.offer(sensor.read(h)))
+        .collect();
+    assert!(answers[..STALL_OFFERS - 1]
+        .iter()
+        .all(|&a| a == Offer::Outlier));
+    assert_eq!(answers[STALL_OFFERS - 1], Offer::Restarted);
+    assert!(c.is_empty());
+    assert_eq!(restarts(&mut c, &mut sensor, &dirs), 0);
+    assert!(c.is_ready());
+    let e = hard_iron_error(&c, &sensor);
+    assert!(e < 0.005, "{e}");
 }
