@@ -114,7 +114,11 @@
 //!   of the magnet in the calibration; on the host (collector and core
 //!   only, 200 seeds) ready after 1007 readings instead of 413. The
 //!   core's screening then left all of them out of the fit, but the
-//!   collection was ruined before.
+//!   collection was ruined before. (Those figures predate the collector's
+//!   own recovery: it now starts over when its first 20 samples hold such
+//!   a reading, [`mag_cal_core::collector::Offer::Restarted`], so it no
+//!   longer stalls, but it discards those samples and the test here still
+//!   saves that.)
 
 use core::fmt::Debug;
 
@@ -209,7 +213,8 @@ pub struct FaultLog {
     pub bus_errors: Count,
     /// Readings excluded.
     pub excluded: Excluded,
-    /// Collections restarted because a disturbance did not end.
+    /// Collections restarted because a disturbance did not end, or
+    /// because the collector started over ([`mag_cal_core::collector::Offer::Restarted`]).
     pub restarts: u32,
     /// Samples the simulator had marked faulty that were nevertheless
     /// offered to the collector or to the heading smoother (the simulator's

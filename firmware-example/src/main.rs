@@ -585,11 +585,16 @@ fn collect<I: I2c, D: DelayNs>(
     let mut refused = [0u32; 2];
     while readings < MAX_READINGS {
         readings += 1;
+        let mut restart = false;
         if let Some((raw, meta)) = dev.next_clean(&reference) {
             let offer = collector.offer(raw);
             match offer {
                 Offer::Glitch => refused[0] += 1,
                 Offer::Outlier => refused[1] += 1,
+                Offer::Restarted => {
+                    warn!("the collector started over: its first samples were a noise ball (the board lying still) or held a wild reading");
+                    restart = true;
+                }
                 _ => {}
             }
             if offer == Offer::Accepted {
@@ -627,8 +632,11 @@ fn collect<I: I2c, D: DelayNs>(
                 "field disturbed for {=u32} readings: the environment changed; restarting the collection",
                 LONG_DISTURBANCE
             );
-            dev.log.restarts += 1;
             collector.clear();
+            restart = true;
+        }
+        if restart {
+            dev.log.restarts += 1;
             marks.clear();
             reference = Reference::Unarmed;
             decile = 0;

@@ -980,6 +980,9 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
                 if full != (offer == Offer::Full) {
                     return Err(format!("offer {offer:?} with len {} of {}", c.len(), $n));
                 }
+                if offer == Offer::Restarted && (!c.is_empty() || c.centre().is_some()) {
+                    return Err(format!("restarted but holds {} samples", c.len()));
+                }
                 if c.len() > $n || c.samples().len() != c.len() {
                     return Err(format!("collector len {} of {}", c.len(), $n));
                 }

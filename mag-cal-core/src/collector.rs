@@ -675,14 +675,18 @@ impl<S: Sample, const N: usize> Collector<S, N> {
     /// [`OUTLIER_MIN_SAMPLES`] samples: medians by rank counting, no sort,
     /// `O(OUTLIER_MIN_SAMPLES^2)`.
     fn first_samples_are_wild(&self) -> bool {
-        let mut first = [[0.0f32; 3]; OUTLIER_MIN_SAMPLES];
-        for (slot, s) in first.iter_mut().zip(&self.samples) {
-            *slot = s.xyz::<f32>();
+        // One array per axis (no indexing by a variable axis: panic-free).
+        let mut axes = [[0.0f32; OUTLIER_MIN_SAMPLES]; 3];
+        let [xs, ys, zs] = &mut axes;
+        let slots = xs.iter_mut().zip(ys.iter_mut()).zip(zs.iter_mut());
+        for (((x, y), z), s) in slots.zip(&self.samples) {
+            [*x, *y, *z] = s.xyz::<f32>();
         }
-        let median = [0, 1, 2].map(|k| lower_median(first.iter().map(|y| y[k])));
+        let median = axes.map(|a| lower_median(a.iter().copied()));
+        let [xs, ys, zs] = &axes;
         let mut dist_sq = [0.0f32; OUTLIER_MIN_SAMPLES];
-        for (d, y) in dist_sq.iter_mut().zip(&first) {
-            let v = sub(*y, median);
+        for (d, ((&x, &y), &z)) in dist_sq.iter_mut().zip(xs.iter().zip(ys).zip(zs)) {
+            let v = sub([x, y, z], median);
             *d = dot(&v, &v);
         }
         let typical = lower_median(dist_sq.iter().copied());

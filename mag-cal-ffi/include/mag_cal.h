@@ -151,6 +151,10 @@ typedef enum {
   MAGCAL_OFFER_OUTLIER = 5,
   // Refused: a null pointer.
   MAGCAL_OFFER_NULL_POINTER = 6,
+  // The collection started over: every stored reading was discarded
+  // and this one was not stored (a collection stalled by a device lying
+  // still at the start, or by a wild reading among the first 20).
+  MAGCAL_OFFER_RESTARTED = 7,
 } MagcalOffer;
 
 // The judging limits (`magcal_config_default` fills the measured ones).

@@ -828,6 +828,10 @@ pub enum MagcalOffer {
     Outlier = 5,
     /// Refused: a null pointer.
     NullPointer = 6,
+    /// The collection started over: every stored reading was discarded
+    /// and this one was not stored (a collection stalled by a device lying
+    /// still at the start, or by a wild reading among the first 20).
+    Restarted = 7,
 }
 
 /// How far a collection is.
@@ -903,6 +907,10 @@ pub unsafe extern "C" fn magcal_collector_offer(
         Offer::NotFinite => MagcalOffer::NotFinite,
         Offer::Full => MagcalOffer::Full,
         Offer::Glitch => MagcalOffer::Glitch,
+        Offer::Outlier => MagcalOffer::Outlier,
+        Offer::Restarted => MagcalOffer::Restarted,
+        // The core's enum is non-exhaustive; a future refusal reads as
+        // the nearest one C callers know.
         _ => MagcalOffer::Outlier,
     }
 }

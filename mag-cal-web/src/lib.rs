@@ -37,7 +37,7 @@ use mag_cal_cli::fit::{fit_timed, Outcome};
 use mag_cal_cli::input::{self, ColumnsUsed, Picked};
 use mag_cal_cli::output;
 use mag_cal_cli::selection::class_name;
-use mag_cal_core::collector::{Collector, Offer, Progress, OUTLIER_MIN_SAMPLES};
+use mag_cal_core::collector::{Collector, Offer, Progress};
 use mag_cal_core::{Config, Method, SampleClass, Warning};
 use serde_json::{json, Value};
 
@@ -213,39 +213,20 @@ pub struct Live {
     /// The collector's refusals, by [`OFFER_NAMES`] (index 0, accepted,
     /// unused).
     refused: [usize; OFFER_NAMES.len()],
-    /// `Raw:` lines in a row that stall the collector ([`RESTART_AFTER`]).
-    stuck: usize,
-    /// Restarts of the collection ([`RESTART_AFTER`]).
-    restarts: usize,
-    /// Samples the restarts discarded.
+    /// Samples discarded when the collection started over
+    /// ([`Offer::Restarted`]).
     discarded: usize,
 }
 
-/// The collection starts again after this many `Raw:` lines in a row
-/// that the collector cannot use although they are readings: refused as
-/// too close while it holds fewer than [`OUTLIER_MIN_SAMPLES`] samples, or
-/// refused as outliers. Both are the collector stalled for good (the
-/// core's [`Collector`] has no such recovery yet):
-/// - a wild first reading (a sensor's start-up value, 30 000 counts off)
-///   puts its running centre so far away that every later reading points
-///   the same way from it and is too close;
-/// - a board lying still when the collection starts gives 20 samples of a
-///   noise ball, whose radius is the noise: every reading of the board
-///   turning is then more than 3 such radii away, an outlier.
-///
-/// A board that lies still restarts it too, at no loss (it holds one
-/// sample); a magnet held at the sensor for as many readings restarts it
-/// twice (on the magnet, and when it is gone).
-pub const RESTART_AFTER: usize = 100;
-
 /// The names of the collector's answers, as [`Live::line`] gives them.
-pub const OFFER_NAMES: [&str; 7] = [
+pub const OFFER_NAMES: [&str; 8] = [
     "accepted",
     "too_close",
     "not_finite",
     "full",
     "glitch",
     "outlier",
+    "restarted",
     "refused",
 ];
 
@@ -255,7 +236,8 @@ impl Live {
     /// JSON: `kind` (`"raw"` or `"skipped"`), for a `Raw:` line `sample`
     /// (`null` values when cut short) and `offer` (the collector's answer:
     /// `accepted`, `too_close`, `not_finite`, `full`, `glitch`,
-    /// `outlier`), and always `progress` ([`Live::progress_json`]).
+    /// `outlier`, `restarted`), and always `progress`
+    /// ([`Live::progress_json`]).
     pub fn line(&mut self, line: &[u8]) -> String {
         let text = String::from_utf8_lossy(line);
         let text = text.trim();
@@ -265,19 +247,11 @@ impl Live {
                 .ok()
                 .and_then(|t| t.samples.first().copied())
                 .unwrap_or([f64::NAN; 3]);
-            if self.stuck >= RESTART_AFTER {
-                self.discarded += self.collector.len();
-                self.collector.clear();
-                self.restarts += 1;
-                self.stuck = 0;
-            }
+            let held = self.collector.len();
             let answer = self.collector.offer(sample);
-            let stalled = match answer {
-                Offer::TooClose => self.collector.len() < OUTLIER_MIN_SAMPLES,
-                Offer::Outlier => true,
-                _ => false,
-            };
-            self.stuck = if stalled { self.stuck + 1 } else { 0 };
+            if answer == Offer::Restarted {
+                self.discarded += held;
+            }
             let offer = offer_index(answer);
             if let Some(n) = self.refused.get_mut(offer).filter(|_| offer > 0) {
                 *n += 1;
@@ -297,8 +271,9 @@ impl Live {
     /// eight sectors of longitude from +x counter-clockwise), the stream's
     /// `lines` and `skipped`, `refused`: the collector's refusals by name
     /// (`too_close`, `not_finite`: a cut-short line, `full`, `glitch`,
-    /// `outlier`), and the collection's `restarts` with the samples they
-    /// `discarded` ([`RESTART_AFTER`]). Every `Raw:` line is counted once:
+    /// `outlier`, `restarted`: the lines on which the collection started
+    /// over, [`Offer::Restarted`]), and the samples those restarts
+    /// `discarded`. Every `Raw:` line is counted once:
     /// `lines = samples + discarded + sum(refused)`.
     pub fn progress_json(&self) -> Value {
         let p: Progress = self.collector.progress();
@@ -312,7 +287,6 @@ impl Live {
             "visited": visited,
             "lines": self.lines,
             "skipped": self.skipped,
-            "restarts": self.restarts,
             "discarded": self.discarded,
             "refused": OFFER_NAMES
                 .iter()
@@ -359,7 +333,8 @@ fn offer_index(offer: Offer) -> usize {
         Offer::Full => 3,
         Offer::Glitch => 4,
         Offer::Outlier => 5,
-        _ => 6,
+        Offer::Restarted => 6,
+        _ => 7,
     }
 }
 
@@ -687,7 +662,7 @@ mod tests {
         let refused = refused_total(&p);
         assert_eq!(refused + p["samples"].as_u64().unwrap(), 801, "{p}");
         assert_eq!(
-            (p["restarts"].as_u64(), p["discarded"].as_u64()),
+            (p["refused"]["restarted"].as_u64(), p["discarded"].as_u64()),
             (Some(0), Some(0))
         );
         let visited = p["visited"].as_array().unwrap();
@@ -726,13 +701,14 @@ mod tests {
         feed(&mut live, &sphere);
         let p = live.progress_json();
         assert_eq!(p["ready"], true, "{p}");
-        assert!(p["restarts"].as_u64() >= Some(1), "{p}");
+        assert_eq!(p["refused"]["restarted"], 1, "{p}");
+        assert!(p["discarded"].as_u64() >= Some(20), "{p}");
         let (code, text) = live.fit(b"", &|| 0.0);
         assert_eq!(code, 0, "{text}");
     }
 
-    /// A wild first reading would stall the collector; the collection
-    /// starts again and then fills as usual.
+    /// A wild first reading would stall the collector; the core's
+    /// collector starts over and then fills as usual.
     #[test]
     fn a_wild_first_reading_does_not_stall_the_collection() {
         let mut live = Live::default();
@@ -740,7 +716,7 @@ mod tests {
         feed(&mut live, &ellipsoid(800));
         let p = live.progress_json();
         assert_eq!(p["ready"], true, "{p}");
-        assert_eq!(p["restarts"], 1, "{p}");
+        assert_eq!(p["refused"]["restarted"], 1, "{p}");
         let refused = refused_total(&p);
         let held = p["samples"].as_u64().unwrap() + p["discarded"].as_u64().unwrap();
         assert_eq!(refused + held, 801, "{p}");

@@ -283,8 +283,8 @@ function showProgress(p) {
     `${p.percent} %: ${p.samples} samples kept of ${p.lines} Raw: lines, ` +
     `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
     (refused.length ? `; not kept: ${refused.join(', ')}` : '') +
-    (p.restarts
-      ? `; restarts: ${p.restarts} (a wild first reading, or the board lying still; ${p.discarded} samples discarded)`
+    (p.refused.restarted
+      ? `; restarts: ${p.refused.restarted} (a wild first reading, or the board lying still at first; ${p.discarded} samples discarded)`
       : '');
   for (const cell of $('cells').children) {
     cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
