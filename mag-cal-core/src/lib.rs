@@ -121,8 +121,11 @@
 //!    ([`CLEAN_KURTOSIS`]) or a residual beyond the limit stops before
 //!    its solve or its final pass;
 //! 3. otherwise screens the rows farther than [`SCREEN_RADIUS`] median
-//!    distances from a coordinate-wise median centre, starts from the crude
-//!    sphere (median centre, median distance), and refits LS with 0/1
+//!    distances from a coordinate-wise median centre (or, when samples
+//!    crowded on one side of the sphere put that centre near the crowded
+//!    side and its ball leaves out the far side, from an algebraic sphere
+//!    fit of the rows within 6 median distances), starts from the
+//!    crude sphere (that centre, the median distance), and refits LS with 0/1
 //!    weights on the residual (at [`OUTLIER_CUT`]` = 3.5` robust standard
 //!    deviations `1.4826 median|r|`, from fixed histograms: no sorting,
 //!    nothing stored per sample), then runs the method with the same
