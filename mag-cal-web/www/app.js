@@ -284,7 +284,7 @@ function showProgress(p) {
     `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
     (refused.length ? `; not kept: ${refused.join(', ')}` : '') +
     (p.refused.restarted
-      ? `; restarts: ${p.refused.restarted} (a wild first reading, or the board lying still at first; ${p.discarded} samples discarded)`
+      ? `; restarts: ${p.refused.restarted} (a wild first reading, the board lying still at first, or a long run of readings far from those kept; ${p.discarded} samples discarded)`
       : '');
   for (const cell of $('cells').children) {
     cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
