@@ -45,6 +45,21 @@ use crate::rules::{check, pieces, Gate, Rules};
 use crate::sample::Sample;
 use crate::{Error, Real};
 
+/// The shape of the algebraic residuals `e = |u|^2 - 1` of a plain pass
+/// (raw moments: the LS start leaves their mean near 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Tails<T> {
+    /// `n sum e^4 / (sum e^2)^2`: about 3 for Gaussian noise, more when a
+    /// share of the rows lies off the ellipsoid (0 when every residual is
+    /// 0).
+    pub kurtosis: T,
+    /// `sqrt(n) sum e^3 / (sum e^2)^(3/2)`: near 0 for small noise,
+    /// positive for large noise (`e = 2 n + n^2` for a radial noise `n`)
+    /// and for rows displaced outwards, negative when a share of the rows
+    /// is pulled inwards, as a clipped axis pulls them.
+    pub skewness: T,
+}
+
 /// Sufficient statistics of the artificial data (normalised units).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stats<T: Real> {
@@ -129,25 +144,30 @@ impl<T: Real> Stats<T> {
         Self::accumulate_plain(samples, norm, centre, w).map(|(stats, _)| stats)
     }
 
-    /// [`Stats::accumulate`], and the kurtosis `n sum e^4 / (sum e^2)^2`
-    /// of the algebraic residuals `e_i = |u_i|^2 - 1` at the start: about 3
-    /// for Gaussian noise, more when a share of the rows lies off the
-    /// ellipsoid (0 when every residual is 0).
+    /// [`Stats::accumulate`], and the shape of the algebraic residuals
+    /// `e_i = |u_i|^2 - 1` at the start ([`Tails`]).
     pub(crate) fn accumulate_plain<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         centre: &Vector3<T>,
         w: &Matrix3<T>,
-    ) -> Result<(Self, T), Error> {
-        let mut tails = [T::zero(); 2];
-        let stats = Self::from_pass(samples, norm, centre, w, Measure::Tails(&mut tails))?;
-        let [s2, s4] = tails;
-        let kurtosis = if s2 > T::zero() {
-            T::from_count(stats.count) * s4 / (s2 * s2)
+    ) -> Result<(Self, Tails<T>), Error> {
+        let mut sums = [T::zero(); 3];
+        let stats = Self::from_pass(samples, norm, centre, w, Measure::Tails(&mut sums))?;
+        let [s2, s3, s4] = sums;
+        let n = T::from_count(stats.count);
+        let tails = if s2 > T::zero() {
+            Tails {
+                kurtosis: n * s4 / (s2 * s2),
+                skewness: n.sqrt() * s3 / (s2 * s2.sqrt()),
+            }
         } else {
-            T::zero()
+            Tails {
+                kurtosis: T::zero(),
+                skewness: T::zero(),
+            }
         };
-        Ok((stats, kurtosis))
+        Ok((stats, tails))
     }
 
     /// [`Stats::accumulate`] over the rows the pass's gate passes whose
@@ -324,9 +344,9 @@ impl<T: Real> Residuals<T> {
 
 /// What a pass measures beside its sums.
 enum Measure<'a, 'p, T: Real> {
-    /// The plain pass (every finite row, weight 1): the sums of `e^2` and
-    /// `e^4` of the algebraic residuals.
-    Tails(&'a mut [T; 2]),
+    /// The plain pass (every finite row, weight 1): the sums of `e^2`,
+    /// `e^3` and `e^4` of the algebraic residuals.
+    Tails(&'a mut [T; 3]),
     /// A gated pass: its gate and cut, and the residuals it measures.
     Gated(&'a Pass<'p, T>, &'a mut Residuals<T>),
 }
@@ -394,17 +414,18 @@ const CHUNK: usize = 32;
 fn plain_directions<T: Real, S: Sample>(
     chunk: &[S],
     map: &Projector<T>,
-    tails: &mut [T; 2],
+    tails: &mut [T; 3],
     out: &mut [[T; 4]; CHUNK],
 ) -> usize {
     let mut count = chunk.len();
-    let [mut s2, mut s4] = *tails;
+    let [mut s2, mut s3, mut s4] = *tails;
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
         *slot = match plain_direction(sample, map) {
             Some((v, q)) => {
                 let e = q - T::one();
                 let e2 = e * e;
                 s2 += e2;
+                s3 += e2 * e;
                 s4 += e2 * e2;
                 v
             }
@@ -414,7 +435,7 @@ fn plain_directions<T: Real, S: Sample>(
             }
         };
     }
-    *tails = [s2, s4];
+    *tails = [s2, s3, s4];
     count
 }
 
@@ -624,22 +645,32 @@ mod tests {
                 let y = norm.point_back(&x);
                 *s = [y.x, y.y, y.z];
             }
-            let (mut s2, mut s4) = (0.0, 0.0);
+            let (mut s2, mut s3, mut s4) = (0.0, 0.0, 0.0);
             for s in samples.iter() {
                 let x = norm.forward(*s) - b0;
                 let e = (w0 * x).norm_squared() - 1.0;
                 s2 += e * e;
+                s3 += e * e * e;
                 s4 += e * e * e * e;
             }
-            let want = samples.len() as f64 * s4 / (s2 * s2);
+            let n = samples.len() as f64;
+            let want = n * s4 / (s2 * s2);
+            let want_skew = n.sqrt() * s3 / s2.powf(1.5);
             let (_, got) = Stats::accumulate_plain(samples, &norm, &b0, &w0).unwrap();
-            assert!((got - want).abs() < 1e-9 * want, "{got} {want}");
+            assert!((got.kurtosis - want).abs() < 1e-9 * want, "{got:?} {want}");
+            assert!(
+                (got.skewness - want_skew).abs() < 1e-9,
+                "{got:?} {want_skew}"
+            );
             got
         };
         let clean = kurtosis(0, &mut samples);
-        assert!((2.6..3.4).contains(&clean), "{clean}");
+        assert!((2.6..3.4).contains(&clean.kurtosis), "{clean:?}");
+        assert!(clean.skewness.abs() < 0.3, "{clean:?}");
+        // Every tenth row 0.3 outside: heavy tails, and all on one side.
         let dirty = kurtosis(200, &mut samples);
-        assert!(dirty > crate::CLEAN_KURTOSIS + 3.0, "{dirty}");
+        assert!(dirty.kurtosis > crate::CLEAN_KURTOSIS + 3.0, "{dirty:?}");
+        assert!(dirty.skewness > crate::CLEAN_SKEWNESS, "{dirty:?}");
     }
 
     #[test]

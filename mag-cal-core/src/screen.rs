@@ -7,7 +7,11 @@
 //!    (nested linear histograms): each pass narrows every axis's window to the
 //!    bins holding its middle half, until that half spans at least
 //!    [`RESOLVED_BINS`] bins (2 passes on data without wild values, 3-4
-//!    with values 100 times the field away);
+//!    with values 100 times the field away). The first of these passes also finds the clip levels: an axis's
+//!    extreme value that many rows share, or a value inside its range
+//!    that many rows share exactly (an axis clipped on some reads only),
+//!    whose bin stands out of its neighbours ([`CLIP_SPIKE`]; two more
+//!    passes, only when one does);
 //! 2. the median distance `m = median |y - c|` (one pass, a logarithmic histogram);
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
@@ -57,6 +61,12 @@ pub const CRUDE_SHARE: f64 = 0.7;
 pub const RESOLVED_BINS: usize = 16;
 /// Cap on the nested histogram passes.
 pub const MAX_LEVELS: u32 = 12;
+/// A bin of the first screening pass's per-axis histogram that holds at
+/// least this many times the rows of each neighbour (and a clip level's
+/// share of all rows) is searched for a value that many rows share
+/// exactly: a clip level inside the range. On a sphere an axis's values
+/// are spread evenly (neighbouring bins hold about as many rows).
+pub const CLIP_SPIKE: u32 = 3;
 /// The algebraic sphere fit that may replace the median centre sees the
 /// rows within this many median distances of it: the far side of a sphere
 /// whose samples crowd on one side (median distance down to a third of the
@@ -369,6 +379,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     let mut iqr = [T::zero(); 3];
     let mut done = [false; 3];
     let mut passes = 0;
+    let mut level_passes = 0;
     let mut rules = scan.rules;
     while passes < MAX_LEVELS && !done.iter().all(|&d| d) {
         let mut h = AxisHistograms::new(lo, hi);
@@ -381,9 +392,11 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
                 fill_first(block, prev, &gate, (&box_lo, &box_hi), &mut at, &mut h);
             }
+            let mut levels = clip_levels(scan.used, (&box_lo, &box_hi), &at);
+            level_passes = interior_levels(samples, &gate, &h, scan.used, &mut levels);
             rules = Rules {
                 glitches: scan.rules.glitches,
-                ..Rules::with_clip(clip_levels(scan.used, (&box_lo, &box_hi), &at))
+                ..Rules::with_clip(levels)
             };
         } else {
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
@@ -423,7 +436,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     }
     let spread = (iqr[0] + iqr[1] + iqr[2]) / T::lit(3.0);
     // The bounds took a pass too.
-    (median, spread, rules, passes + 1)
+    (median, spread, rules, passes + 1 + level_passes)
 }
 
 /// Widens `acc` (smallest and largest value of each axis) by every
@@ -502,6 +515,85 @@ fn clip_levels<T: Real>(
     out
 }
 
+/// Clip levels inside an axis's range: a value that at least
+/// [`crate::rules::CLIP_SHARE`] of the rows (and
+/// [`crate::rules::CLIP_MIN_ROWS`]) share exactly, on a side of an axis
+/// whose extreme is no clip level. A clip that left some rows beyond it
+/// (an axis clipped on some reads only) puts such a value inside the
+/// range, where the extremes' count does not see it; its bin of the first
+/// pass's histogram `h` stands out of its neighbours ([`CLIP_SPIKE`]).
+/// Only when one does, two passes: a majority vote among the rows in that
+/// bin gives the value, a count confirms it. Returns the passes taken.
+#[inline(never)]
+fn interior_levels<T: Real, S: Sample>(
+    samples: &[S],
+    gate: &Gate<T>,
+    h: &AxisHistograms<T>,
+    used: usize,
+    levels: &mut [[T; 2]; 3],
+) -> u32 {
+    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
+    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
+    let least = u32::try_from(many).unwrap_or(u32::MAX);
+    // Per axis and side the bin to look in (0: none; the counter index
+    // otherwise, never 0, the counter below the window).
+    let mut bins = [[0usize; 2]; 3];
+    for (a, (b, l)) in bins.iter_mut().zip(levels.iter()).enumerate() {
+        for (side, (bin, level)) in b.iter_mut().zip(l).enumerate() {
+            if !(level.abs() < T::MAX) {
+                *bin = h.spike(a, side == 1, least, CLIP_SPIKE).unwrap_or(0);
+            }
+        }
+    }
+    if bins.iter().flatten().all(|&k| k == 0) {
+        return 0;
+    }
+    // Boyer-Moore majority vote per bin: the value a majority of the bin's
+    // rows share, if any (the count below confirms it).
+    let mut votes = [[(T::zero(), 0u32); 2]; 3];
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        for y in gate.rows(block, prev) {
+            for (a, (b, v)) in bins.iter().zip(votes.iter_mut()).enumerate() {
+                let k = h.counter_of(a, y[a]);
+                for (&bin, (value, count)) in b.iter().zip(v.iter_mut()) {
+                    if bin == 0 || k != bin {
+                        continue;
+                    }
+                    if *count == 0 {
+                        (*value, *count) = (y[a], 1);
+                    } else if *value == y[a] {
+                        *count += 1;
+                    } else {
+                        *count -= 1;
+                    }
+                }
+            }
+        }
+    }
+    let mut shared = [[0usize; 2]; 3];
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        for y in gate.rows(block, prev) {
+            for (a, (b, (v, n))) in bins
+                .iter()
+                .zip(votes.iter().zip(shared.iter_mut()))
+                .enumerate()
+            {
+                for ((&bin, &(value, _)), n) in b.iter().zip(v).zip(n.iter_mut()) {
+                    *n += usize::from(bin != 0 && y[a] == value);
+                }
+            }
+        }
+    }
+    for (((b, v), n), l) in bins.iter().zip(&votes).zip(&shared).zip(levels.iter_mut()) {
+        for (((&bin, &(value, _)), &n), level) in b.iter().zip(v).zip(n).zip(l.iter_mut()) {
+            if bin != 0 && n >= many && n <= used / 2 {
+                *level = value;
+            }
+        }
+    }
+    2
+}
+
 /// Adds the rows of `block` that the gate passes to the histograms.
 #[inline(never)]
 fn fill<T: Real, S: Sample>(
@@ -569,5 +661,45 @@ fn shell_residuals<T: Real, S: Sample>(
             T::one()
         };
         h.add(r);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::normalize::scan;
+
+    /// A sphere of 1000 integer rows, and every other row beyond `x = 320`
+    /// (a tenth of them beyond) clipped to it: a level inside the axis's
+    /// range, found by the screening's interior search and dropped; the
+    /// rows left beyond it are kept.
+    #[test]
+    fn a_clip_level_inside_the_range_is_found() {
+        let mut rows: [[i16; 3]; 1000] = core::array::from_fn(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / 1000.0;
+            let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963);
+            let v = [r * phi.cos(), r * phi.sin(), z].map(|c| (400.0 * c).round() as i16);
+            [v[0] + 150, v[1] - 80, v[2] + 20]
+        });
+        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
+        let clean = screen(&rows, &s).unwrap();
+        assert_eq!(clean.drops.clipped, 0);
+        let mut clipped = 0;
+        let mut beyond = 0;
+        for row in rows.iter_mut().filter(|r| r[0] > 470) {
+            beyond += 1;
+            if beyond % 2 == 0 {
+                row[0] = 470;
+                clipped += 1;
+            }
+        }
+        assert!(clipped > 40, "{clipped}");
+        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
+        let dirty = screen(&rows, &s).unwrap();
+        assert_eq!(dirty.rules.clip[0][1], 470.0);
+        // The clipped rows, and the clean rows that were at 470 already.
+        let at = rows.iter().filter(|r| r[0] == 470).count();
+        assert_eq!(dirty.drops.clipped, at);
+        assert!(at >= clipped && at < clipped + 5, "{at} {clipped}");
     }
 }

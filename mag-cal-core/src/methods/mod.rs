@@ -130,10 +130,11 @@ pub(crate) struct Weights<T: Real> {
     /// Robust standard deviation of the radial residuals under the start
     /// (from the previous pass: the weights lag one pass).
     pub sigma: Option<T>,
-    /// A plain pass whose residuals' kurtosis exceeds this ends the method
-    /// with an error (the robust path follows; see
-    /// [`crate::CLEAN_KURTOSIS`]).
-    pub kurtosis_limit: Option<T>,
+    /// A plain pass whose residuals' kurtosis exceeds the first, or whose
+    /// skewness is below minus the second, ends the method with an
+    /// error (the robust path follows; see [`crate::CLEAN_KURTOSIS`] and
+    /// [`crate::CLEAN_SKEWNESS`]).
+    pub tails_limit: Option<(T, T)>,
 }
 
 impl<T: Real> Weights<T> {
@@ -141,7 +142,7 @@ impl<T: Real> Weights<T> {
     pub(crate) const PLAIN: Self = Self {
         gate: Gate::PLAIN,
         sigma: None,
-        kurtosis_limit: None,
+        tails_limit: None,
     };
 
     /// The residual limit, [`OUTLIER_CUT`] robust standard deviations.
@@ -154,7 +155,7 @@ impl<T: Real> Weights<T> {
         Self {
             gate: self.gate,
             sigma,
-            kurtosis_limit: self.kurtosis_limit,
+            tails_limit: self.tails_limit,
         }
     }
 }
@@ -177,9 +178,12 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
     weights: &Weights<T>,
 ) -> Result<(Stats<T>, Option<T>, T), Error> {
     if weights.gate.is_plain() && weights.sigma.is_none() {
-        let (stats, kurtosis) = Stats::accumulate_plain(samples, norm, centre, w)?;
-        if weights.kurtosis_limit.is_some_and(|limit| kurtosis > limit) {
-            // Heavy tails: this plain fit will not be taken.
+        let (stats, tails) = Stats::accumulate_plain(samples, norm, centre, w)?;
+        let outside =
+            |(kurtosis, skewness): (T, T)| tails.kurtosis > kurtosis || tails.skewness < -skewness;
+        if weights.tails_limit.is_some_and(outside) {
+            // Heavy tails, or rows pulled inwards: this plain fit will not be
+            // taken.
             return Err(Error::OutOfRange);
         }
         return Ok((stats, None, T::zero()));
