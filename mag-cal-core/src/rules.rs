@@ -15,7 +15,10 @@
 //! - has a component at a clip level: the largest or smallest value of an
 //!   axis when at least [`CLIP_SHARE`] of the rows share it exactly (an
 //!   axis that saturated below the type's rails; noise makes an axis's
-//!   extreme a value few rows share).
+//!   extreme a value few rows share), or a value inside the axis's range
+//!   that as many rows share exactly, on a side whose extreme is no clip
+//!   level (an axis clipped on some reads only; the robust path's
+//!   screening looks for it where its histogram shows a spike).
 //!
 //! The last four only when outlier handling is on
 //! ([`crate::Config::robust`]). No per-sample mask is stored: every pass

@@ -521,7 +521,8 @@ fn clip_levels<T: Real>(
 /// whose extreme is no clip level. A clip that left some rows beyond it
 /// (an axis clipped on some reads only) puts such a value inside the
 /// range, where the extremes' count does not see it; its bin of the first
-/// pass's histogram `h` stands out of its neighbours ([`CLIP_SPIKE`]).
+/// pass's histogram `h` stands out of its neighbours ([`CLIP_SPIKE`]),
+/// where that histogram resolves the axis.
 /// Only when one does, two passes: a majority vote among the rows in that
 /// bin gives the value, a count confirms it. Returns the passes taken.
 #[inline(never)]
@@ -539,8 +540,16 @@ fn interior_levels<T: Real, S: Sample>(
     // otherwise, never 0, the counter below the window).
     let mut bins = [[0usize; 2]; 3];
     for (a, (b, l)) in bins.iter_mut().zip(levels.iter()).enumerate() {
+        // Only where the window resolves the axis (its middle half spans
+        // RESOLVED_BINS bins): with wild values in the window, the whole
+        // cloud sits in a few bins, which stand out of their empty
+        // neighbours.
+        let resolved = match (h.quantile(a, T::lit(0.25)), h.quantile(a, T::lit(0.75))) {
+            (Place::In(k1, _), Place::In(k3, _)) => k3 + 1 >= k1 + RESOLVED_BINS,
+            _ => false,
+        };
         for (side, (bin, level)) in b.iter_mut().zip(l).enumerate() {
-            if !(level.abs() < T::MAX) {
+            if resolved && !(level.abs() < T::MAX) {
                 *bin = h.spike(a, side == 1, least, CLIP_SPIKE).unwrap_or(0);
             }
         }
