@@ -88,12 +88,11 @@ fn pooled(cells: impl Iterator<Item = CellStats>) -> CellStats {
 /// Targets of the issue: at least 97 % of the runs accepted, median error
 /// ratios (`e_M`, `e_b`) to the clean fit of the same rows at most 1.3, at
 /// most 0.5 % of the runs accepted with an error above 0.05. Met by every
-/// kind and fraction but a displaced patch and a moving disturbance at
-/// 10 %: those are accepted in 80-97 % of the runs (the rest refused as a
-/// systematic misfit, with the figure) with median ratios up to 1.4 for
-/// one-step ADC2, so there the test asserts the measured level (75 %, 1.5)
-/// instead of the target. A clipped range (every row beyond a level on
-/// one axis) loses the cap beyond the level: its ratio is held to 2.
+/// kind and fraction but the ratios of a moving disturbance at 10 % (up
+/// to 1.5 for one-step ADC2: held to that measured level instead of the
+/// target); a displaced patch at 10 % has its own test at 256 runs a cell
+/// (here 64, too few to resolve 97 %). A clipped range (every row beyond a level on one axis) loses
+/// the cap beyond the level: its ratio is held to 2.
 #[test]
 fn contamination_up_to_ten_percent() {
     let grid = up_to_ten_percent();
@@ -122,13 +121,16 @@ fn contamination_up_to_ten_percent() {
                 for &f in &grid.fractions {
                     let cell = study.pooled(&Case::Contaminated(kind, f));
                     let what = format!("{label} {} {}", kind.name(), f);
-                    let missed = f > 0.05 && matches!(kind, Kind::Patch | Kind::Moving);
                     // A clipped range is dropped by the clip rule: the cap
                     // of directions beyond it is then unobserved, and the
                     // fit of the rest is as good as that coverage allows
                     // (the clean fit saw the cap).
                     let (needed, ratio) = match kind {
-                        _ if missed => (0.75, 1.5),
+                        Kind::Moving if f > 0.05 => (0.97, 1.5),
+                        // 64 runs a cell here, where one run is 1.6 %: the
+                        // 97 % of the target is asserted on 256 runs a cell
+                        // by `a_displaced_patch_of_the_trajectory_is_left_out`.
+                        Kind::Patch if f > 0.05 => (0.95, 1.3),
                         Kind::RangeClip => (0.97, 2.0),
                         _ => (0.97, 1.3),
                     };
@@ -142,6 +144,55 @@ fn contamination_up_to_ten_percent() {
                     assert!(rm <= ratio && rb <= ratio, "{what}: ratios {rm} {rb}");
                 }
             }
+        }
+    }
+}
+
+/// A tenth of the trajectory, one patch of directions, displaced by 0.3 of
+/// the field (a magnet near one orientation of the device), 64 runs a
+/// setting, robust ADC2 and iterated ADC2, f32 and f64: at least 97 % of
+/// the runs accepted, none wrong, median ratios at most 1.3. The robust
+/// LS refits from the crude sphere used to keep the patch (the first
+/// refit's cut comes from the crude sphere's error, 0.1 of the field on a
+/// distorted ellipsoid) and settle on the ellipsoid it bulged: 89.5 % of
+/// the one-step runs were accepted, the rest refused as a systematic
+/// misfit with `M` off by 0.07-0.28. The trimmed refits on the subsample
+/// (`robust::TRIM_SHARE`) escape it.
+#[test]
+fn a_displaced_patch_of_the_trajectory_is_left_out() {
+    let grid = Grid {
+        kinds: vec![Kind::Patch],
+        fractions: vec![0.1],
+        degenerate: vec![],
+        ..Grid::full(64)
+    };
+    for method in [Method::Adc2, Method::Adc2Iterated] {
+        for precision in Precision::ALL {
+            let config = Config {
+                method,
+                ..Config::default()
+            };
+            let study = run_study(&config, precision, &grid);
+            let cell = study.pooled(&Case::Contaminated(Kind::Patch, 0.1));
+            let what = format!("{method:?} {} patch 0.1", precision.name());
+            let (rm, rb) = (cell.median_ratio_m(), cell.median_ratio_b());
+            println!(
+                "{what}: {} runs, {:.1} % accepted, {:.2} % silently wrong, median ratios {rm:.2} / {rb:.2}",
+                cell.runs,
+                100.0 * cell.accepted_share(),
+                100.0 * cell.wrong_share(),
+            );
+            assert!(
+                cell.accepted_share() >= 0.97,
+                "{what}: {:?}",
+                cell.main_refusals()
+            );
+            assert!(
+                cell.wrong_share() <= 0.005,
+                "{what}: {}",
+                cell.wrong_share()
+            );
+            assert!(rm <= 1.3 && rb <= 1.3, "{what}: {rm} {rb}");
         }
     }
 }
