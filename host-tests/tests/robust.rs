@@ -91,8 +91,9 @@ fn pooled(cells: impl Iterator<Item = CellStats>) -> CellStats {
 /// kind and fraction but the ratios of a moving disturbance at 10 % (up
 /// to 1.5 for one-step ADC2: held to that measured level instead of the
 /// target); a displaced patch at 10 % has its own test at 256 runs a cell
-/// (here 64, too few to resolve 97 %). A clipped range (every row beyond a level on one axis) loses
-/// the cap beyond the level: its ratio is held to 2.
+/// (here 64, too few to resolve 97 %). A clipped range (every row beyond a
+/// level on one axis) loses the cap beyond the level: its ratio is held
+/// to 2.
 #[test]
 fn contamination_up_to_ten_percent() {
     let grid = up_to_ten_percent();
@@ -148,6 +149,30 @@ fn contamination_up_to_ten_percent() {
     }
 }
 
+/// Prints the figures of `cell` under `what` and asserts that at least
+/// `accepted` of its runs were accepted, at most `wrong` silently wrong,
+/// and that the median error ratios are at most `ratio` (`e_M`, `e_b`).
+fn assert_cell(what: &str, cell: &CellStats, accepted: f64, wrong: f64, ratio: (f64, f64)) {
+    let (rm, rb) = (cell.median_ratio_m(), cell.median_ratio_b());
+    println!(
+        "{what}: {} runs, {:.1} % accepted, {:.2} % silently wrong, median ratios {rm:.2} / {rb:.2}",
+        cell.runs,
+        100.0 * cell.accepted_share(),
+        100.0 * cell.wrong_share(),
+    );
+    assert!(
+        cell.accepted_share() >= accepted,
+        "{what}: {:?}",
+        cell.main_refusals()
+    );
+    assert!(
+        cell.wrong_share() <= wrong,
+        "{what}: {}",
+        cell.wrong_share()
+    );
+    assert!(rm <= ratio.0 && rb <= ratio.1, "{what}: ratios {rm} {rb}");
+}
+
 /// A tenth of the trajectory, one patch of directions, displaced by 0.3 of
 /// the field (a magnet near one orientation of the device), 64 runs a
 /// setting, robust ADC2 and iterated ADC2, f32 and f64: at least 97 % of
@@ -176,24 +201,7 @@ fn a_displaced_patch_of_the_trajectory_is_left_out() {
             let study = run_study(&config, precision, &grid);
             let cell = study.pooled(&Case::Contaminated(Kind::Patch, 0.1));
             let what = format!("{method:?} {} patch 0.1", precision.name());
-            let (rm, rb) = (cell.median_ratio_m(), cell.median_ratio_b());
-            println!(
-                "{what}: {} runs, {:.1} % accepted, {:.2} % silently wrong, median ratios {rm:.2} / {rb:.2}",
-                cell.runs,
-                100.0 * cell.accepted_share(),
-                100.0 * cell.wrong_share(),
-            );
-            assert!(
-                cell.accepted_share() >= 0.97,
-                "{what}: {:?}",
-                cell.main_refusals()
-            );
-            assert!(
-                cell.wrong_share() <= 0.005,
-                "{what}: {}",
-                cell.wrong_share()
-            );
-            assert!(rm <= 1.3 && rb <= 1.3, "{what}: {rm} {rb}");
+            assert_cell(&what, &cell, 0.97, 0.005, (1.3, 1.3));
         }
     }
 }
@@ -220,26 +228,7 @@ fn an_axis_clipped_on_some_reads_is_found() {
         for &f in &grid.fractions {
             let cell = study.pooled(&Case::Contaminated(Kind::ClipSaturation, f));
             let what = format!("{} clip {f}", precision.name());
-            println!(
-                "{what}: {} runs, {:.1} % accepted, {:.2} % silently wrong, median ratios {:.2} / {:.2}",
-                cell.runs,
-                100.0 * cell.accepted_share(),
-                100.0 * cell.wrong_share(),
-                cell.median_ratio_m(),
-                cell.median_ratio_b()
-            );
-            assert!(cell.wrong_share() <= 0.02, "{what}: {}", cell.wrong_share());
-            assert!(
-                cell.accepted_share() >= 0.97,
-                "{what}: {:?}",
-                cell.main_refusals()
-            );
-            assert!(
-                cell.median_ratio_m() <= 1.5 && cell.median_ratio_b() <= 1.6,
-                "{what}: {} {}",
-                cell.median_ratio_m(),
-                cell.median_ratio_b()
-            );
+            assert_cell(&what, &cell, 0.97, 0.02, (1.5, 1.6));
         }
     }
 }

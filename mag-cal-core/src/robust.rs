@@ -98,7 +98,7 @@ fn fit_moments<T: Real>(moments: &Moments<T>, solve: Solve<T>) -> Result<Ellipso
 /// What a refit pass measured of the residuals `|e|` under the fit it
 /// started from, for the next pass's cut.
 #[derive(Clone, Copy)]
-struct Residuals<T: Real> {
+struct Spread<T: Real> {
     /// Robust sigma, `1.4826 median|e|`.
     sigma: T,
     /// The [`TRIM_SHARE`] quantile of `|e|`.
@@ -117,7 +117,7 @@ fn weighted_moments<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     limit: T,
     stride: usize,
-) -> (Moments<T>, Option<Residuals<T>>) {
+) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
     let cut = Cut {
@@ -127,7 +127,7 @@ fn weighted_moments<T: Real, S: Sample>(
     let m = Moments::accumulate_every(samples, norm, gate, Some(&cut), Some(&mut hist), stride);
     let measured = robust_sigma(&hist)
         .zip(hist.quantile(T::lit(TRIM_SHARE)))
-        .map(|(sigma, trim)| Residuals { sigma, trim });
+        .map(|(sigma, trim)| Spread { sigma, trim });
     (m, measured)
 }
 

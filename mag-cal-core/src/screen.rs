@@ -678,10 +678,10 @@ mod tests {
     use super::*;
     use crate::normalize::scan;
 
-    /// A sphere of 1000 integer rows, and every other row beyond `x = 320`
-    /// (a tenth of them beyond) clipped to it: a level inside the axis's
-    /// range, found by the screening's interior search and dropped; the
-    /// rows left beyond it are kept.
+    /// A sphere of 1000 integer rows, and every other row beyond `x = 470`
+    /// (320 counts from the centre; a tenth of the rows lie beyond) clipped
+    /// to it: a level inside the axis's range, found by the screening's
+    /// interior search and dropped; the rows left beyond it are kept.
     #[test]
     fn a_clip_level_inside_the_range_is_found() {
         let mut rows: [[i16; 3]; 1000] = core::array::from_fn(|i| {
