@@ -183,13 +183,13 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     for (rounds, rows) in [(sub_refits, every), (full_refits, 1)] {
         let mut last_kept = None;
         for _ in 0..rounds {
-            let mut limit = sigma * T::lit(OUTLIER_CUT);
             // `passes` counts the crude start's pass: the refits after the
             // first (which has no quantile yet) are trimmed, up to
             // `TRIM_REFITS` of them.
-            if let Some(t) = trim.filter(|_| rows > 1 && passes <= TRIM_REFITS + 1) {
-                limit = smaller(limit, t);
-            }
+            let trimmed = trim.filter(|_| rows > 1 && passes <= TRIM_REFITS + 1);
+            let limit = trimmed.map_or(sigma * T::lit(OUTLIER_CUT), |t| {
+                smaller(sigma * T::lit(OUTLIER_CUT), t)
+            });
             let (m, measured) = weighted_moments(samples, screening, gate, &ls, limit, rows);
             passes += 1;
             if let Some(r) = measured {
@@ -206,11 +206,13 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             ls = next;
             // The subsample's count need only settle (the refits on every
             // row follow); on every row it must repeat.
+            // A trimmed refit keeps about the trimmed share by construction:
+            // its count says nothing about settling.
             let settled = |before: usize| kept.abs_diff(before) <= if rows > 1 { 1 } else { 0 };
-            if last_kept.is_some_and(settled) {
+            if trimmed.is_none() && last_kept.is_some_and(settled) {
                 break;
             }
-            last_kept = Some(kept);
+            last_kept = trimmed.is_none().then_some(kept);
         }
     }
     Ok(RobustLs {
