@@ -8,10 +8,12 @@
 //! fails and an improvement is visible.
 
 use host_tests::contamination::{
-    fit_errors, run_study, Case, CellStats, Degenerate, Grid, Kind, Precision,
+    contaminate, fit_errors, run_study, Case, CellStats, CleanRun, Coverage, Degenerate, Grid,
+    Kind, Precision, Setting, Units,
 };
 use host_tests::scenarios::{Truth, SCENARIOS};
-use mag_cal_core::{calibrate, Config, Error, Method};
+use host_tests::sim::Rng;
+use mag_cal_core::{calibrate, Config, Error, Method, SampleClass};
 
 /// Plain ADC2 (outlier handling off) and the default (on), on the clean
 /// scenarios A-G: the robust default is never refused, and its mean errors
@@ -127,7 +129,6 @@ fn contamination_up_to_ten_percent() {
                     // fit of the rest is as good as that coverage allows
                     // (the clean fit saw the cap).
                     let (needed, ratio) = match kind {
-                        Kind::Moving if f > 0.05 => (0.97, 1.5),
                         // 64 runs a cell here, where one run is 1.6 %: the
                         // 97 % of the target is asserted on 256 runs a cell
                         // by `a_displaced_patch_of_the_trajectory_is_left_out`.
@@ -204,6 +205,75 @@ fn a_displaced_patch_of_the_trajectory_is_left_out() {
             assert_cell(&what, &cell, 0.97, 0.005, (1.3, 1.3));
         }
     }
+}
+
+/// A disturbance that moves past the sensor (the displacement rises and
+/// falls over a tenth of the rows, peak 0.5 of the field), robust ADC2 and
+/// iterated ADC2 in f32 and f64: the rows beside the run of rejected rows
+/// are left out ([`mag_cal_core::runs`]), so the fit meets the targets up
+/// to 10 % (measured 1.16-1.23 against 1.32-1.47 before the runs, whose
+/// edges, displaced by less than the cut, were used).
+#[test]
+fn a_moving_disturbance_is_left_out_with_its_edges() {
+    let grid = Grid {
+        kinds: vec![Kind::Moving],
+        fractions: vec![0.1],
+        degenerate: vec![],
+        ..Grid::full(64)
+    };
+    for method in [Method::Adc2, Method::Adc2Iterated] {
+        for precision in Precision::ALL {
+            let config = Config {
+                method,
+                ..Config::default()
+            };
+            let study = run_study(&config, precision, &grid);
+            let cell = study.pooled(&Case::Contaminated(Kind::Moving, 0.1));
+            let what = format!("{method:?} {} moving 0.1", precision.name());
+            assert_cell(&what, &cell, 0.97, 0.005, (1.3, 1.3));
+        }
+    }
+}
+
+/// The rows of a run and beside it: the report counts them as rejected,
+/// `classify` says so row by row, and the span holds the disturbance's
+/// peak.
+#[test]
+fn the_rows_beside_a_run_are_counted_and_classified_as_rejected() {
+    let mut with_runs = 0;
+    for seed in 0..8u64 {
+        let setting = Setting {
+            units: Units::MicroTesla,
+            coverage: Coverage::Sphere,
+            n: 1000,
+        };
+        let run = CleanRun::generate(setting, &mut Rng(77 + seed));
+        let c = contaminate(&run, Kind::Moving, 0.1, &mut Rng(5 + seed));
+        let rows = &c.rows.samples;
+        let fit = calibrate::<f64, _>(rows, &Config::default()).expect("calibrates");
+        let r = &fit.report;
+        let runs = r.selection.runs;
+        let classes: Vec<SampleClass> = r.selection.classify(&fit.calibration, rows).collect();
+        let count = |class: SampleClass| classes.iter().filter(|&&k| k == class).count();
+        assert_eq!(count(SampleClass::Used), r.samples_used, "seed {seed}");
+        assert_eq!(count(SampleClass::Rejected), r.rejected, "seed {seed}");
+        assert_eq!(count(SampleClass::Screened), r.screened, "seed {seed}");
+        assert_eq!(
+            r.samples_used + r.samples_dropped + r.screened + r.rejected,
+            rows.len()
+        );
+        // The disturbance's peak, its middle row, lies in a span.
+        let first = c.marked.iter().position(|&m| m).expect("displaced rows");
+        let last = c.marked.iter().rposition(|&m| m).expect("displaced rows");
+        with_runs += usize::from(runs.contains((first + last) / 2));
+        for &(s, e) in runs.spans() {
+            assert!(
+                (s..e).all(|i| classes[i] != SampleClass::Used),
+                "seed {seed}"
+            );
+        }
+    }
+    assert_eq!(with_runs, 8, "a span at the peak in {with_runs} of 8 runs");
 }
 
 /// One axis clipped on some reads (a lower clip level with rows left

@@ -34,8 +34,12 @@ pub struct Outcome {
     pub drops: DropCounts,
     /// Rows kept by the rules but screened out (too far from the others).
     pub screened: usize,
-    /// Rows inside the screening rejected by their radial residual.
+    /// Rows inside the screening rejected by their radial residual, or
+    /// beside a run of such rows.
     pub rejected: usize,
+    /// Of the rejected rows, those beside a run with a residual within the
+    /// cut (not counted in the outlier share).
+    pub beside_runs: usize,
     /// Hard-iron offset `b`, sensor units.
     pub hard_iron: [f64; 3],
     /// Soft-iron matrix `W`, rows; symmetric; `W (raw - b)` is on the unit
@@ -236,6 +240,7 @@ fn fit_in<T: Real>(
         drops: DropCounts(report.drops),
         screened: report.screened,
         rejected: report.rejected,
+        beside_runs: report.beside_runs,
         hard_iron: [b.x, b.y, b.z].map(T::to_f64),
         soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
         field_strength: cal.field_strength().to_f64(),

@@ -142,7 +142,23 @@ fn sample_counts(o: &Outcome) -> String {
     }
     let _ = write!(s, ", {} rejected", o.rejected);
     if let Some(limit) = o.selection.residual_limit.filter(|_| o.rejected > 0) {
-        let _ = write!(s, " (residual beyond {} of the field)", sig(limit, 3));
+        let _ = write!(s, " (residual beyond {} of the field", sig(limit, 3));
+        let spans: Vec<String> = o
+            .selection
+            .runs
+            .spans()
+            .iter()
+            .map(|&(start, end)| format!("{start}-{}", end - 1))
+            .collect();
+        if !spans.is_empty() {
+            let _ = write!(
+                s,
+                ", or beside a run of such rows: {}; {} of them within it",
+                spans.join(", "),
+                o.beside_runs
+            );
+        }
+        s.push(')');
     }
     s
 }
@@ -245,6 +261,7 @@ mod tests {
             }),
             screened: 0,
             rejected: 3,
+            beside_runs: 0,
             hard_iron: [-156.7, -52.79, 0.1 + 0.2],
             soft_iron: [[0.0041, 1e-5, 0.0], [1e-5, 0.0041, 0.0], [0.0, 0.0, 0.0039]],
             field_strength: 250.0,

@@ -8,15 +8,18 @@
 //! {"glitch_rules": true,
 //!  "clip_levels": [[null, 512], [null, null], [-480, null]],
 //!  "screen": {"centre": [x, y, z], "radius": r},
-//!  "residual_limit": 0.094}
+//!  "residual_limit": 0.094,
+//!  "runs": [[120, 245]]}
 //! ```
 //!
 //! `screen` and `residual_limit` are `null` when the fit did not screen or
-//! weight its rows (a clean plain fit, or `--plain`). With `glitch_rules`
-//! false and everything else `null` it is [`Selection::ALL`]: every finite
-//! row used.
+//! weight its rows (a clean plain fit, or `--plain`). `runs` lists the
+//! spans of rows `[start, end)` rejected beside runs of rejected rows
+//! ([`mag_cal_core::runs`]); a selection written without it has none. With
+//! `glitch_rules` false, everything else `null` and no runs it is
+//! [`Selection::ALL`]: every finite row used.
 
-use mag_cal_core::{Drops, Real, Rule, SampleClass, Selection};
+use mag_cal_core::{runs::RUNS, Drops, Real, Rule, Runs, SampleClass, Selection};
 use serde::ser::SerializeMap;
 use serde::{Serialize, Serializer};
 use serde_json::Value;
@@ -65,6 +68,14 @@ pub struct SelectionJson {
     pub screen: Option<Screen>,
     /// Rows whose `||W (y - b)| - 1|` exceeds this were rejected.
     pub residual_limit: Option<f64>,
+    /// Rows in these spans, beside runs of rejected rows, were rejected.
+    #[serde(serialize_with = "spans")]
+    pub runs: Runs,
+}
+
+/// The spans of `runs` as `[[start, end], ...]`.
+fn spans<S: Serializer>(runs: &Runs, serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.collect_seq(runs.spans().iter().map(|&(s, e)| [s, e]))
 }
 
 impl SelectionJson {
@@ -74,6 +85,7 @@ impl SelectionJson {
         clip_levels: [[None; 2]; 3],
         screen: None,
         residual_limit: None,
+        runs: Runs::NONE,
     };
 
     /// The core's selection, widened to `f64` (exactly).
@@ -86,6 +98,7 @@ impl SelectionJson {
                 radius: radius.to_f64(),
             }),
             residual_limit: s.residual_limit.map(T::to_f64),
+            runs: s.runs,
         }
     }
 
@@ -99,6 +112,7 @@ impl SelectionJson {
                 .screen
                 .map(|s| (s.centre.map(T::lit), T::lit(s.radius))),
             residual_limit: self.residual_limit.map(T::lit),
+            runs: self.runs,
         }
     }
 
@@ -160,11 +174,29 @@ impl SelectionJson {
                 "'selection.residual_limit' must be null or a non-negative number".to_owned(),
             )?),
         };
+        let runs = match obj.get("runs") {
+            None => Runs::NONE,
+            Some(v) => {
+                let span = |v: &Value| -> Option<(usize, usize)> {
+                    let a = v.as_array().filter(|a| a.len() == 2)?;
+                    let end = |v: &Value| v.as_u64().and_then(|x| usize::try_from(x).ok());
+                    Some((end(&a[0])?, end(&a[1])?))
+                };
+                v.as_array()
+                    .and_then(|a| a.iter().map(span).collect::<Option<Vec<_>>>())
+                    .and_then(|spans| Runs::from_spans(&spans))
+                    .ok_or(format!(
+                        "'selection.runs' must be at most {RUNS} pairs [start, end] of row \
+                         indices, each non-empty, ascending and apart"
+                    ))?
+            }
+        };
         Ok(Self {
             glitch_rules,
             clip_levels,
             screen,
             residual_limit,
+            runs,
         })
     }
 }
@@ -216,6 +248,7 @@ mod tests {
             clip_levels: [[None, Some(512.0)], [None, None], [Some(-480.25), None]],
             screen: Some(([1.5, -2.0, 0.1], 812.3)),
             residual_limit: Some(0.0946),
+            runs: Runs::from_spans(&[(3, 40), (500, 531)]).expect("valid spans"),
         };
         let json = SelectionJson::from_core(&core);
         let text = serde_json::to_string(&json).expect("serialises");
@@ -229,8 +262,13 @@ mod tests {
             plain,
             serde_json::json!({"glitch_rules": false,
                                "clip_levels": [[null, null], [null, null], [null, null]],
-                               "screen": null, "residual_limit": null})
+                               "screen": null, "residual_limit": null, "runs": []})
         );
+        // A selection written before runs were found reads as none.
+        let old = r#"{"glitch_rules":true,"clip_levels":[[null,1],[null,null],[2,null]],"screen":null,"residual_limit":0.1}"#;
+        let old =
+            SelectionJson::from_json(&serde_json::from_str(old).expect("json")).expect("reads");
+        assert!(old.runs.is_empty());
     }
 
     #[test]
@@ -267,6 +305,14 @@ mod tests {
             (
                 r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null}"#,
                 "missing field 'selection.residual_limit'",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"runs":[[5,9],[8,12]]}"#,
+                "'selection.runs' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"runs":[[5,-9]]}"#,
+                "'selection.runs' must be",
             ),
         ] {
             let err = SelectionJson::from_json(&serde_json::from_str(text).expect("json"))

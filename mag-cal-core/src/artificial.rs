@@ -42,6 +42,7 @@ use crate::linalg::{columns_of, from_columns, inverse3, larger};
 use crate::moments::BLOCK;
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{check, pieces, Gate, Rules};
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::{Error, Real};
 
@@ -366,7 +367,11 @@ fn sums<T: Real, S: Sample>(
     let mut buf = [[T::zero(); 4]; CHUNK];
     // The plain pass (every finite row, weight 1) needs neither the rules
     // nor the residuals: its loop is the cheaper one.
-    for (block_prev, block) in pieces(samples, BLOCK) {
+    let runs = match &weighted {
+        Measure::Tails(_) => Runs::NONE,
+        Measure::Gated(pass, _) => pass.gate.runs,
+    };
+    for (_, block_prev, block) in runs.pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);

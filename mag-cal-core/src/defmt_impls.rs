@@ -54,11 +54,12 @@ macro_rules! formats {
             fn format(&self, f: Formatter<'_>) {
                 write!(
                     f,
-                    "Selection {{ glitch_rules: {}, clip_levels: {}, screen: {}, residual_limit: {} }}",
+                    "Selection {{ glitch_rules: {}, clip_levels: {}, screen: {}, residual_limit: {}, runs: {} }}",
                     self.glitch_rules,
                     self.clip_levels,
                     self.screen,
-                    self.residual_limit
+                    self.residual_limit,
+                    self.runs.spans()
                 );
             }
         }

@@ -98,7 +98,7 @@
 //! | `distortion` | condition number of `M` (squared axis ratio) | above 16: [`Error::ExtremeDistortion`] | |
 //! | `coverage` | smallest eigenvalue of the calibrated directions' covariance: 1/3 full sphere, 0.085 a +-30 deg band | below 0.05: [`Error::PoorCoverage`] | Gram condition above 20 |
 //! | `fit_error` | robust sigma `1.4826 median||u| - 1|` of the radial residuals, in units of the field | above 0.2: [`Error::NoSphere`] (a device lying still, a filled cloud) | above 0.05 |
-//! | `outlier_share` | share of the valid rows the fit left out | above 0.25: [`Error::TooManyOutliers`] | |
+//! | `outlier_share` | share of the valid rows the fit left out as outliers (screened, or beyond the cut) | above 0.25: [`Error::TooManyOutliers`] | |
 //! | `lack_of_fit` | systematic radial misfit over 24 direction cells | above 0.01 and significant: [`Error::SystematicMisfit`] | |
 //!
 //! With [`Config::expected_field_strength`] a field strength more than
@@ -131,7 +131,9 @@
 //!    nothing stored per sample), then runs the method with the same
 //!    weights. The quantiles of the screening and the refits before the
 //!    last two use a fixed subsample of about [`SUBSAMPLE_ROWS`] rows
-//!    (every `k`-th row), so their cost hardly grows with `n`.
+//!    (every `k`-th row), so their cost hardly grows with `n`. Where
+//!    consecutive rows lie far beyond the cut (a disturbance passing), the
+//!    rows beside them, displaced less, are left out too ([`runs`]).
 //!
 //! The report says what happened ([`Report::drops`], [`Report::screened`],
 //! [`Report::rejected`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
@@ -225,6 +227,7 @@ mod quasi_newton;
 mod real;
 mod robust;
 mod rules;
+pub mod runs;
 mod sample;
 mod screen;
 #[cfg(test)]
@@ -244,6 +247,7 @@ use quality::Figures;
 pub use quality::{Quality, Thresholds, Warning, Warnings};
 pub use real::Real;
 pub use rules::{Drops, Rule, SampleClass, Selection};
+pub use runs::Runs;
 pub use sample::{Sample, SampleStore};
 pub use screen::{SCREEN_RADIUS, SUBSAMPLE_ROWS};
 
@@ -354,8 +358,13 @@ pub struct Report<T: Real> {
     pub drops: Drops,
     /// Rows kept by the rules but screened out: too far from the others.
     pub screened: usize,
-    /// Rows kept and inside the screening, rejected by their residual.
+    /// Rows kept and inside the screening, rejected by their residual or
+    /// left out beside a run of rows rejected by theirs ([`runs`]).
     pub rejected: usize,
+    /// Of the rejected rows, those left out beside a run although their
+    /// residual is within the cut (not outliers: the outlier share leaves
+    /// them out).
+    pub beside_runs: usize,
     /// RMS of `|W (y - b)| - 1` over the rows used.
     pub radial_rms: T,
     /// The figures behind the checks.
@@ -529,6 +538,7 @@ fn plain_start<T: Real, S: Sample>(
     let gate = rules::Gate {
         rules: scan.rules,
         screen: None,
+        runs: crate::runs::Runs::NONE,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
@@ -591,6 +601,7 @@ fn robust_start<T: Real, S: Sample>(
     let gate = rules::Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
+        runs: crate::runs::Runs::NONE,
     };
     let crude = robust::crude_moments(samples, &screening, &gate);
     figures.flatness = Some(quality::flatness(&crude, crude.count())?);
@@ -609,7 +620,7 @@ fn robust_start<T: Real, S: Sample>(
         norm: screening.norm,
         ls: fitted.ls,
         weights: methods::Weights {
-            gate,
+            gate: fitted.gate,
             sigma: Some(fitted.sigma),
             tails_limit: None,
         },
@@ -684,6 +695,14 @@ fn finish<T: Real, S: Sample>(
         Err(e) => return Err(judge_failure(figures, config, e)),
     };
     figures.used = Some(last.used);
+    // The rows beside runs (skipped by the passes) within the cut are no
+    // outliers.
+    let gate = &start.weights.gate;
+    figures.beside = gate.runs.count(samples, |s, prev| {
+        gate.pass(s, prev).is_some_and(|y| {
+            limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l)
+        })
+    });
     figures.coverage = Some(last.coverage);
     figures.gram_condition = Some(last.gram_condition);
     figures.radial_rms = Some(last.radial_rms);
@@ -695,6 +714,7 @@ fn finish<T: Real, S: Sample>(
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
+    let runs = start.weights.gate.runs;
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
         quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
@@ -714,8 +734,17 @@ fn finish<T: Real, S: Sample>(
         samples_used: last.used,
         samples_dropped: figures.drops.total(),
         drops: figures.drops,
-        screened: figures.valid.saturating_sub(last.passed),
-        rejected: last.passed.saturating_sub(last.used),
+        // The rows beside runs of rejected rows, which the passes skip,
+        // count as rejected.
+        screened: figures
+            .valid
+            .saturating_sub(last.passed)
+            .saturating_sub(runs.rows()),
+        rejected: last
+            .passed
+            .saturating_add(runs.rows())
+            .saturating_sub(last.used),
+        beside_runs: figures.beside,
         radial_rms: last.radial_rms,
         quality,
         warnings,
@@ -731,6 +760,7 @@ fn finish<T: Real, S: Sample>(
                 .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
             screen: start.weights.gate.screen.as_ref().map(to_sensor),
             residual_limit: limit,
+            runs,
         },
     };
     Ok(Finished {

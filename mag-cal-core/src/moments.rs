@@ -9,7 +9,8 @@ use nalgebra::SMatrix;
 
 use crate::histogram::LogHistogram;
 use crate::normalize::{Normalization, Projector};
-use crate::rules::{check, every, pieces, Gate, Rules};
+use crate::rules::{check, every, Gate, Rules};
+use crate::runs::{RunFinder, STRONG};
 use crate::sample::Sample;
 use crate::Real;
 
@@ -127,15 +128,29 @@ impl<T: Real> Moments<T> {
         norm: &Normalization<T>,
         gate: &Gate<T>,
         cut: Option<&Cut<T>>,
-        mut hist: Option<&mut LogHistogram>,
+        hist: Option<&mut LogHistogram>,
         stride: usize,
     ) -> Self {
         if gate.is_plain() && cut.is_none() && stride <= 1 {
             return Self::accumulate(samples, norm);
         }
+        Self::accumulate_finding(samples, norm, gate, cut, hist, stride, None)
+    }
+
+    /// [`Moments::accumulate_every`] that also hands each row the cut
+    /// rejects to `finder`, which finds the runs of such rows.
+    pub(crate) fn accumulate_finding<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        gate: &Gate<T>,
+        cut: Option<&Cut<T>>,
+        mut hist: Option<&mut LogHistogram>,
+        stride: usize,
+        mut finder: Option<&mut RunFinder>,
+    ) -> Self {
         let mut sums = [T::zero(); COUNT];
         let (low, high) = sums.split_at_mut(LOW);
-        for (prev, block) in pieces(samples, BLOCK) {
+        for (start, prev, block) in gate.runs.pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
             let kept = select(
                 block,
@@ -145,6 +160,7 @@ impl<T: Real> Moments<T> {
                 hist.as_deref_mut(),
                 &mut mask,
                 stride,
+                finder.as_deref_mut().map(|f| (start, f)),
             );
             let mut a = sum_low(block, norm, &mask);
             a[0] = T::from_count(kept);
@@ -296,10 +312,13 @@ pub(crate) struct Cut<T: Real> {
 /// Marks in `mask` the rows of `block` (every `stride`-th, from the first)
 /// that the gate passes and the cut keeps, and returns their count;
 /// `hist`, when given, counts the cut's residual of every row the gate
-/// passes. A loop of its own: with the
+/// passes; `finder`, when given, gets the index of each row whose
+/// residual exceeds [`STRONG`] times the cut's limit (the block's first
+/// row is at the index given). A loop of its own: with the
 /// gate's and the cut's constants beside the 19 sums, one loop spilled
 /// (about 230 instructions a sample on a Cortex-M4F for this and
 /// [`sum_low`] together, against about 150 apart).
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn select<T: Real, S: Sample>(
     block: &[S],
@@ -309,11 +328,13 @@ fn select<T: Real, S: Sample>(
     mut hist: Option<&mut LogHistogram>,
     mask: &mut [u32; MASK_WORDS],
     stride: usize,
+    mut finder: Option<(usize, &mut RunFinder)>,
 ) -> usize {
     let half = T::lit(0.5);
     // The cut by value: its constants then stay in registers rather than
     // being read again after each histogram write.
     let cut = cut.copied();
+    let strong = cut.map_or(T::MAX, |c| c.limit * T::lit(STRONG));
     let mut count = 0;
     for (i, s, last) in every(block, prev, stride) {
         let Some(y) = gate.pass(s, last) else {
@@ -326,6 +347,10 @@ fn select<T: Real, S: Sample>(
                 h.add(e);
             }
             if !(e.abs() <= cut.limit) {
+                // Only rows well beyond the cut count towards a run.
+                if let Some((start, f)) = finder.as_mut().filter(|_| e.abs() > strong) {
+                    f.reject(start.saturating_add(i));
+                }
                 continue;
             }
         }

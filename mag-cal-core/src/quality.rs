@@ -12,7 +12,7 @@ use crate::histogram::LogHistogram;
 use crate::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
 use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
-use crate::rules::{pieces, Filter, Finite, Gate};
+use crate::rules::{Filter, Finite, Gate};
 use crate::sample::Sample;
 use crate::{Error, Figure, Real};
 
@@ -63,7 +63,8 @@ pub struct Quality<T: Real> {
     /// significant against the noise ([`LOF_SIGNIFICANCE`]).
     pub lack_of_fit: T,
     /// Share of the rows kept by the rules that the fit did not use
-    /// (screened out, or residual beyond the cut).
+    /// (screened out, or residual beyond the cut; not the rows left out
+    /// beside a run of rejected rows with a residual within the cut).
     pub outlier_share: T,
 }
 
@@ -123,7 +124,8 @@ pub const WARN_FIT_ERROR: f64 = 0.05;
 /// noise on a real sphere 0.18-0.19; a filled ball 0.24-0.27, a cube
 /// 0.28-0.30, a stationary device or a blob 0.37-0.44.
 pub const REFUSE_FIT_ERROR: f64 = 0.20;
-/// Share of rows not used above this: [`Error::TooManyOutliers`].
+/// Share of rows not used above this (not counting the rows beside a run
+/// within the cut, [`crate::runs`]): [`Error::TooManyOutliers`].
 pub const REFUSE_OUTLIER_SHARE: f64 = 0.25;
 /// Lack of fit above this (1 % of the field), significant against the
 /// noise: [`Error::SystematicMisfit`]. Measured on a simulated
@@ -210,6 +212,9 @@ pub(crate) struct Figures<T: Real> {
     pub valid: usize,
     /// Rows the final fit used.
     pub used: Option<usize>,
+    /// Rows left out beside runs of rejected rows whose residual is within
+    /// the cut: left out, but no outliers.
+    pub beside: usize,
     pub drops: crate::rules::Drops,
     /// Robust path: outlier handling on, the new refusals apply.
     pub robust: bool,
@@ -249,6 +254,7 @@ impl<T: Real> Figures<T> {
         Self {
             valid,
             used: None,
+            beside: 0,
             drops,
             robust,
             judge_lack_of_fit,
@@ -282,7 +288,8 @@ impl<T: Real> Figures<T> {
         if self.valid == 0 {
             return None;
         }
-        Some(T::from_count(self.valid.saturating_sub(used)) / T::from_count(self.valid))
+        let out = self.valid.saturating_sub(used).saturating_sub(self.beside);
+        Some(T::from_count(out) / T::from_count(self.valid))
     }
 }
 
@@ -313,7 +320,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         if let (Some(used), Some(share)) = (f.used, f.outlier_share()) {
             if above(Some(share), th.refuse_outlier_share) {
                 return Err(Error::TooManyOutliers {
-                    rejected: f.valid.saturating_sub(used),
+                    rejected: f.valid.saturating_sub(used).saturating_sub(f.beside),
                     valid: f.valid,
                     limit: Figure::new(th.refuse_outlier_share),
                 });
@@ -658,7 +665,7 @@ impl<T: Real> FinalSums<T> {
             directions,
         };
         let (hist, cells, acc) = (&mut self.hist, &mut self.cells, &mut self.acc);
-        for (prev, block) in pieces(samples, BLOCK) {
+        for (prev, block) in gate.pieces(samples, BLOCK) {
             if gate.is_plain() {
                 final_block(block, prev, &Finite, &spec, hist, cells, acc);
             } else {

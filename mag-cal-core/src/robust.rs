@@ -31,7 +31,10 @@
 //! settles (changes by at most one), then two refits run on every row (one
 //! left a few more silently wrong fits at 20-30 % contamination);
 //! without a subsample (fewer than twice that many rows) up to [`REFITS`]
-//! refits run on every row until the count repeats. Each pass on every row
+//! refits run on every row until the count repeats. The first refit on
+//! every row after two refits also finds the runs of rows far beyond the
+//! cut ([`crate::runs`]); the passes after it skip the rows beside them.
+//! Each pass on every row
 //! costs about 100 instructions a sample on a Cortex-M4F for the selection
 //! plus about 100 a kept row for its moments (an exec-log profile of a
 //! 10 % contaminated run, `docs/benchmarks.md`). The method's own passes
@@ -46,6 +49,7 @@ use crate::methods::{robust_sigma, OUTLIER_CUT};
 use crate::moments::{Cut, Moments};
 use crate::normalize::Projector;
 use crate::rules::Gate;
+use crate::runs::RunFinder;
 use crate::sample::Sample;
 use crate::screen::{stride, Screening};
 use crate::{Error, Real};
@@ -86,6 +90,9 @@ pub(crate) struct RobustLs<T: Real> {
     pub sigma: T,
     /// Passes over the samples.
     pub passes: u32,
+    /// The gate with the spans beside runs of rejected rows
+    /// ([`crate::runs`]), for the method's passes.
+    pub gate: Gate<T>,
 }
 
 /// The LS fit of `moments`. Out of line: the 10x10 scatter takes stack
@@ -117,6 +124,7 @@ fn weighted_moments<T: Real, S: Sample>(
     ls: &Ellipsoid<T>,
     limit: T,
     stride: usize,
+    finder: Option<&mut RunFinder>,
 ) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
@@ -124,7 +132,15 @@ fn weighted_moments<T: Real, S: Sample>(
         map: Projector::new(norm, &ls.centre, &ls.w),
         limit,
     };
-    let m = Moments::accumulate_every(samples, norm, gate, Some(&cut), Some(&mut hist), stride);
+    let m = Moments::accumulate_finding(
+        samples,
+        norm,
+        gate,
+        Some(&cut),
+        Some(&mut hist),
+        stride,
+        finder,
+    );
     let measured = robust_sigma(&hist)
         .zip(hist.quantile(T::lit(TRIM_SHARE)))
         .map(|(sigma, trim)| Spread { sigma, trim });
@@ -170,6 +186,8 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     let mut passes = 1;
     let mut ls = fit_moments(&moments, solve)?;
     let mut sigma = screening.sphere_error;
+    let mut gate = *gate;
+    let mut found = false;
     // The crude start's pass measured no residuals: no trimming yet.
     let mut trim = None;
     let every = stride(screening.valid);
@@ -190,8 +208,18 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             let limit = trimmed.map_or(sigma * T::lit(OUTLIER_CUT), |t| {
                 smaller(sigma * T::lit(OUTLIER_CUT), t)
             });
-            let (m, measured) = weighted_moments(samples, screening, gate, &ls, limit, rows);
+            // The first refit on every row after two refits finds the runs
+            // of rejected rows; the passes after it skip the rows beside
+            // them.
+            let mut finder = (rows == 1 && passes >= 3 && !found).then(RunFinder::new);
+            let (m, measured) =
+                weighted_moments(samples, screening, &gate, &ls, limit, rows, finder.as_mut());
             passes += 1;
+            let just_found = finder.is_some();
+            if let Some(f) = finder {
+                found = true;
+                gate.runs = f.finish(samples, |s, prev| gate.pass(s, prev).is_some());
+            }
             if let Some(r) = measured {
                 sigma = r.sigma;
                 trim = Some(r.trim);
@@ -212,7 +240,8 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             if trimmed.is_none() && last_kept.is_some_and(settled) {
                 break;
             }
-            last_kept = trimmed.is_none().then_some(kept);
+            // A count before rows were left out says nothing of the next.
+            last_kept = (trimmed.is_none() && !just_found).then_some(kept);
         }
     }
     Ok(RobustLs {
@@ -220,5 +249,6 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
         moments,
         sigma,
         passes,
+        gate,
     })
 }

@@ -25,6 +25,7 @@
 //! re-applies the rules to the read-only samples (a few instructions a
 //! sample), and the repetition rule reads the row before.
 
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::Real;
 
@@ -256,6 +257,8 @@ pub(crate) struct Gate<T: Real> {
     pub rules: Rules<T>,
     /// Samples outside are screened out.
     pub screen: Option<Ball<T>>,
+    /// Rows beside runs of rejected rows, skipped.
+    pub runs: Runs,
 }
 
 impl<T: Real> Gate<T> {
@@ -263,7 +266,22 @@ impl<T: Real> Gate<T> {
     pub(crate) const PLAIN: Self = Self {
         rules: Rules::PLAIN,
         screen: None,
+        runs: Runs::NONE,
     };
+
+    /// The pieces of `samples` the gate's passes visit (outside the spans
+    /// of [`Gate::runs`]), each at most `size` rows, with the row before
+    /// each.
+    #[inline(always)]
+    pub(crate) fn pieces<'a, S>(
+        &'a self,
+        samples: &'a [S],
+        size: usize,
+    ) -> impl Iterator<Item = (Option<&'a S>, &'a [S])> + 'a {
+        self.runs
+            .pieces(samples, size)
+            .map(|(_, prev, piece)| (prev, piece))
+    }
 
     /// Whether the gate passes every finite, representable row.
     pub(crate) fn is_plain(&self) -> bool {
@@ -349,7 +367,8 @@ pub enum SampleClass {
     Dropped(Rule),
     /// The row lies too far from the others (screening).
     Screened,
-    /// The row's radial residual under the calibration exceeds the cut.
+    /// The row's radial residual under the calibration exceeds the cut,
+    /// or the row lies beside a run of such rows ([`crate::runs`]).
     Rejected,
 }
 
@@ -369,6 +388,9 @@ pub struct Selection<T: Real> {
     /// Rows whose radial residual `||u| - 1|` under the calibration exceeds
     /// this were rejected.
     pub residual_limit: Option<T>,
+    /// Rows in these spans, beside runs of rejected rows, were rejected
+    /// too ([`crate::runs`]).
+    pub runs: Runs,
 }
 
 impl<T: Real> Selection<T> {
@@ -378,6 +400,7 @@ impl<T: Real> Selection<T> {
         clip_levels: [[None; 2]; 3],
         screen: None,
         residual_limit: None,
+        runs: Runs::NONE,
     };
 
     pub(crate) fn rules(&self) -> Rules<T> {
@@ -401,6 +424,7 @@ impl<T: Real> Selection<T> {
                 centre,
                 radius_sq: r * r,
             }),
+            runs: self.runs,
         }
     }
 
@@ -433,9 +457,10 @@ impl<T: Real> Selection<T> {
         let Gate {
             rules,
             screen: ball,
+            runs,
         } = self.gate();
         let mut prev = None;
-        samples.iter().map(move |s| {
+        samples.iter().enumerate().map(move |(i, s)| {
             let row = check::<T, S>(s, prev, &rules);
             prev = Some(s);
             let y = match row {
@@ -444,6 +469,9 @@ impl<T: Real> Selection<T> {
             };
             if ball.is_some_and(|b| !b.contains(y)) {
                 return SampleClass::Screened;
+            }
+            if runs.contains(i) {
+                return SampleClass::Rejected;
             }
             match self.residual_limit {
                 Some(limit) => {
@@ -594,6 +622,7 @@ mod tests {
             [3.0, 3.0, 1.0],
         ];
         let gate = Gate::<f32> {
+            runs: Runs::NONE,
             rules: Rules::GLITCHES,
             screen: Some(Ball {
                 centre: [0.0; 3],

@@ -192,6 +192,10 @@ static SCALARS_F64: Scalars<f64> = Scalars {
     window: DEFAULT_WINDOW,
 };
 
+/// Spans for `Runs::from_spans` (a selection read back from storage).
+static BUF_SPANS: [(usize, usize); 3] = [(3, 9), (20, 21), (usize::MAX - 1, usize::MAX)];
+static SPANS: RawSlice<(usize, usize)> = RawSlice::of(&BUF_SPANS);
+
 /// Bytes for `persist::from_bytes` and `crc32`.
 static BUF_BYTES: [u8; 8] = *b"MCAL\x01\x04\0\0";
 static BYTES: RawSlice<u8> = RawSlice::of(&BUF_BYTES);
@@ -226,6 +230,14 @@ fn fit<T: Real, S: Sample>(samples: &'static RawSlice<S>, raw: [T; 3]) {
         let selection = opaque(&fit.report.selection);
         for class in selection.classify(cal, samples.get()) {
             keep(class);
+        }
+        if let Some(runs) = mag_cal_core::Runs::from_spans(SPANS.get()) {
+            let selection = mag_cal_core::Selection { runs, ..selection };
+            for class in selection.classify(cal, samples.get()) {
+                keep(class);
+            }
+            keep(runs.contains(opaque(&7usize)));
+            keep(runs.missed());
         }
     }
     keep(result);

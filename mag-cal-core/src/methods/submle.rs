@@ -33,7 +33,7 @@ use crate::methods::{Estimate, Weights};
 use crate::moments::BLOCK;
 use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
-use crate::rules::{pieces, Gate};
+use crate::rules::Gate;
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
 
@@ -86,7 +86,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let mut cost = T::zero();
         let mut dm = Matrix3::zeros();
         let mut db = Vector3::zeros();
-        for (prev, block) in pieces(self.samples, BLOCK) {
+        for (prev, block) in self.gate.pieces(self.samples, BLOCK) {
             let (mut c_blk, mut dm_blk, mut db_blk) =
                 (T::zero(), Matrix3::zeros(), Vector3::zeros());
             for y in self.gate.rows(block, prev) {

@@ -1,0 +1,343 @@
+//! Step 1 on contaminated data, continued: the rows beside runs of rejected
+//! rows are left out too (beyond the design document).
+//!
+//! A disturbance that passes the sensor (a magnet, a motor, a steel door)
+//! displaces a stretch of consecutive rows, and the rows at its edges are
+//! displaced by less than the residual cut: they pass it and bend the fit.
+//! So where [`RUN_LENGTH`] consecutive rows have a residual beyond
+//! [`STRONG`] times the cut, the rows from [`MARGIN`] before the first of
+//! them to [`MARGIN`] after the last are left out of the passes that follow
+//! (spans that touch merge). Rejected rows scattered in time (glitches,
+//! isolated displacements) leave their neighbours alone.
+//!
+//! The spans are found once, in the robust LS fit's first refit on every
+//! row after two refits; the later refits, the method's passes and the final
+//! pass skip them, and [`crate::Selection::classify`] reports their rows
+//! as rejected. At most [`RUNS`] spans are kept: later runs are left to the
+//! residual cut, and their count is reported ([`Runs::missed`]).
+//!
+//! Measured on the contamination study (`docs/results.md`, f32, 64 runs a
+//! cell): a moving disturbance over 10 % of the rows, median error ratios
+//! to the clean fit 1.35 / 1.47 -> 1.16 / 1.23; over 20 %, 3.9 -> 3.1 % of
+//! the runs silently wrong; a patch of 20 %, ratios 2.17 / 3.21 -> 1.84 /
+//! 2.94; but patch 30 % 6.6 -> 7.0 % and moving 30 % 3.1 -> 3.5 % silently
+//! wrong. In all, 53 of 18 688 runs silently wrong before and after
+//! (iterated ADC2 47 -> 41). The rows beside a run within the cut do not
+//! count as outliers ([`crate::Quality::outlier_share`]): counted, they
+//! refused a quarter of the patches of 20 % (66 -> 50 % accepted).
+//!
+//! Runs of any rejected rows (a factor of 1 instead of [`STRONG`], 10 rows
+//! each side) also caught the clean rows that a fit bent by a patch of
+//! 30 % rejects beside the patch, and leaving out their neighbours bent it
+//! further: 72 runs silently wrong (patch 30 %: 6.6 -> 13.3 %); a factor
+//! of 2 (10 rows), 57; 4 (20 rows), 52 but the moving ratios 1.23 / 1.27.
+//! With three rejected rows within five as a run instead of six
+//! consecutive ones (a factor of 1), every run of isolated displacements
+//! of 20 % was refused: too many rows left out.
+
+/// This many consecutive rows with a residual beyond [`STRONG`] times the
+/// cut are a run.
+pub const RUN_LENGTH: usize = 6;
+
+/// A row counts towards a run when its residual exceeds the cut by this
+/// factor (the core of a disturbance, not the edge of a bent fit).
+pub const STRONG: f64 = 3.0;
+
+/// Rows left out on each side of a run (20 gave the moving disturbance of
+/// 10 % ratios of 1.18 / 1.25 and 54 runs silently wrong, 30 1.16 / 1.23
+/// and 53).
+pub const MARGIN: usize = 30;
+
+/// The most spans kept.
+pub const RUNS: usize = 8;
+
+/// The spans of rows left out beside runs of rejected rows: half-open
+/// ranges `start..end` of row indices, ascending and disjoint.
+///
+/// ```
+/// use mag_cal_core::Runs;
+/// let runs = Runs::from_spans(&[(10, 40), (100, 130)]).unwrap();
+/// assert!(runs.contains(39) && !runs.contains(40));
+/// assert_eq!(runs.spans(), &[(10, 40), (100, 130)]);
+/// assert!(Runs::from_spans(&[(50, 60), (55, 70)]).is_none()); // overlap
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Runs {
+    spans: [(usize, usize); RUNS],
+    len: usize,
+    rows: usize,
+    missed: usize,
+}
+
+impl Default for Runs {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+impl Runs {
+    /// No span: every row is judged on its own.
+    pub const NONE: Self = Self {
+        spans: [(0, 0); RUNS],
+        len: 0,
+        rows: 0,
+        missed: 0,
+    };
+
+    /// The spans `start..end` given, or `None` unless each is non-empty,
+    /// they ascend without touching, and there are at most [`RUNS`].
+    pub fn from_spans(spans: &[(usize, usize)]) -> Option<Self> {
+        let mut runs = Self::NONE;
+        let mut end = None;
+        for &(s, e) in spans {
+            if s >= e || end.is_some_and(|last| s <= last) {
+                return None;
+            }
+            *runs.spans.get_mut(runs.len)? = (s, e);
+            runs.len += 1;
+            end = Some(e);
+        }
+        Some(runs)
+    }
+
+    /// The spans, ascending.
+    pub fn spans(&self) -> &[(usize, usize)] {
+        self.spans.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Whether row `i` lies in a span.
+    pub fn contains(&self, i: usize) -> bool {
+        self.spans().iter().any(|&(s, e)| s <= i && i < e)
+    }
+
+    /// Whether there is no span.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Runs found after [`RUNS`] spans were kept, left to the residual cut.
+    pub fn missed(&self) -> usize {
+        self.missed
+    }
+
+    /// Rows in the spans that the rules and the screening passed (the
+    /// report counts them as rejected).
+    pub(crate) fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// The rows of the spans for which `keep(row, row before)` holds.
+    pub(crate) fn count<S>(
+        &self,
+        samples: &[S],
+        mut keep: impl FnMut(&S, Option<&S>) -> bool,
+    ) -> usize {
+        let mut n = 0usize;
+        for &(s, e) in self.spans() {
+            let mut prev = s.checked_sub(1).and_then(|j| samples.get(j));
+            for row in samples.get(s..e).unwrap_or(&[]) {
+                n += usize::from(keep(row, prev));
+                prev = Some(row);
+            }
+        }
+        n
+    }
+
+    /// The pieces of `samples` outside the spans, each at most `size` rows,
+    /// with its first row's index and the row before it in `samples` (the
+    /// repetition rule reads it). Without spans, the chunks of `size`.
+    #[inline(always)]
+    pub(crate) fn pieces<'a, S>(
+        &'a self,
+        samples: &'a [S],
+        size: usize,
+    ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
+        let size = size.max(1);
+        let spans = self.spans();
+        let (mut at, mut k) = (0usize, 0usize);
+        core::iter::from_fn(move || {
+            // Past the spans that begin at or before `at`: at most one
+            // step a span.
+            while let Some(&(s, e)) = spans.get(k) {
+                if at < s {
+                    break;
+                }
+                at = at.max(e);
+                k += 1;
+            }
+            let stop = spans.get(k).map_or(samples.len(), |&(s, _)| s);
+            let end = stop.min(samples.len()).min(at.saturating_add(size));
+            let piece = samples.get(at..end).filter(|p| !p.is_empty())?;
+            let prev = at.checked_sub(1).and_then(|j| samples.get(j));
+            let start = at;
+            at = end;
+            Some((start, prev, piece))
+        })
+    }
+}
+
+/// Finds the spans from the rows rejected by their residual, given in
+/// ascending order.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RunFinder {
+    /// The first and the last row of the latest stretch of consecutive
+    /// rejected rows.
+    stretch: Option<(usize, usize)>,
+    /// The span still growing.
+    open: Option<(usize, usize)>,
+    runs: Runs,
+}
+
+impl RunFinder {
+    pub(crate) const fn new() -> Self {
+        Self {
+            stretch: None,
+            open: None,
+            runs: Runs::NONE,
+        }
+    }
+
+    /// Row `i` was rejected by its residual (rows in ascending order).
+    #[inline(never)]
+    pub(crate) fn reject(&mut self, i: usize) {
+        let first = match self.stretch {
+            Some((first, last)) if last.checked_add(1) == Some(i) => first,
+            _ => i,
+        };
+        self.stretch = Some((first, i));
+        if i.saturating_sub(first) + 1 >= RUN_LENGTH {
+            let span = (
+                first.saturating_sub(MARGIN),
+                i.saturating_add(MARGIN).saturating_add(1),
+            );
+            self.open = match self.open {
+                Some((s, e)) if span.0 <= e => Some((s, e.max(span.1))),
+                Some(done) => {
+                    self.close(done);
+                    Some(span)
+                }
+                None => Some(span),
+            };
+        }
+    }
+
+    fn close(&mut self, span: (usize, usize)) {
+        match self.runs.spans.get_mut(self.runs.len) {
+            Some(slot) => {
+                *slot = span;
+                self.runs.len += 1;
+            }
+            None => self.runs.missed = self.runs.missed.saturating_add(1),
+        }
+    }
+
+    /// The spans, clipped to the rows of `samples`, with the count of their
+    /// rows for which `keep(row, row before)` holds (those the rules and
+    /// the screening pass).
+    pub(crate) fn finish<S>(
+        mut self,
+        samples: &[S],
+        keep: impl FnMut(&S, Option<&S>) -> bool,
+    ) -> Runs {
+        if let Some(open) = self.open.take() {
+            self.close(open);
+        }
+        let mut runs = Runs {
+            missed: self.runs.missed,
+            ..Runs::NONE
+        };
+        for &(s, e) in self.runs.spans() {
+            let e = e.min(samples.len());
+            if let Some(slot) = runs.spans.get_mut(runs.len).filter(|_| s < e) {
+                *slot = (s, e);
+                runs.len += 1;
+            }
+        }
+        runs.rows = runs.count(samples, keep);
+        runs
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `RUN_LENGTH` consecutive rows from `first`.
+    fn run(first: usize) -> core::ops::Range<usize> {
+        first..first + RUN_LENGTH
+    }
+
+    #[test]
+    fn scattered_rejections_are_no_run() {
+        // One row short of a run, and rows apart by one.
+        let mut f = RunFinder::new();
+        for i in (100..100 + RUN_LENGTH - 1).chain((200..240).step_by(2)) {
+            f.reject(i);
+        }
+        let runs = f.finish(&[0u8; 300], |_, _| true);
+        assert!(runs.is_empty(), "{runs:?}");
+    }
+
+    #[test]
+    fn consecutive_rejections_are_a_run() {
+        let mut f = RunFinder::new();
+        for i in 100..100 + RUN_LENGTH + 3 {
+            f.reject(i);
+        }
+        let runs = f.finish(&[0u8; 1000], |_, _| true);
+        let span = (100 - MARGIN, 100 + RUN_LENGTH + 3 + MARGIN);
+        assert_eq!(runs.spans(), &[span]);
+        assert_eq!(runs.rows(), span.1 - span.0);
+    }
+
+    #[test]
+    fn touching_runs_merge_and_spans_stop_at_the_ends() {
+        let mut f = RunFinder::new();
+        for i in run(1)
+            .chain(run(1 + RUN_LENGTH + 2 * MARGIN))
+            .chain(run(995))
+        {
+            f.reject(i);
+        }
+        let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
+        let runs = f.finish(&rows, |&row, _| row % 10 == 0);
+        let end = 1 + 2 * RUN_LENGTH + 3 * MARGIN;
+        assert_eq!(runs.spans(), &[(0, end), (995 - MARGIN, 1000)]);
+        // Every tenth row: 11 in the first span, 970, 980 and 990 in the second.
+        assert_eq!(runs.rows(), end.div_ceil(10) + 3);
+    }
+
+    #[test]
+    fn runs_beyond_the_capacity_are_counted() {
+        let mut f = RunFinder::new();
+        for i in (0..RUNS + 2).flat_map(|k| run(k * 1000)) {
+            f.reject(i);
+        }
+        let runs = f.finish(&[0u8; 100_000], |_, _| true);
+        assert_eq!(runs.spans().len(), RUNS);
+        assert_eq!(runs.missed(), 2);
+    }
+
+    #[test]
+    fn the_pieces_skip_the_spans() {
+        let rows: [usize; 100] = core::array::from_fn(|i| i);
+        let runs = Runs::from_spans(&[(0, 5), (20, 30), (95, 120)]).unwrap();
+        let mut next = 0;
+        for (start, prev, piece) in runs.pieces(&rows, 8) {
+            assert_eq!(prev, start.checked_sub(1).map(|j| &rows[j]));
+            assert!(piece.len() <= 8);
+            for &i in piece {
+                // Every row outside the spans, once, in order.
+                while runs.contains(next) {
+                    next += 1;
+                }
+                assert_eq!(i, next);
+                next += 1;
+            }
+        }
+        assert_eq!(next, 95);
+        let mut ends = Runs::NONE.pieces(&rows, 32).map(|(s, _, p)| s + p.len());
+        assert!([32, 64, 96, 100].into_iter().eq(ends.by_ref()));
+    }
+}
