@@ -153,7 +153,7 @@ fn sample_counts(o: &Outcome) -> String {
         if !spans.is_empty() {
             let _ = write!(
                 s,
-                ", or beside a run of such rows: {}; {} of them within it",
+                ", or beside a run of such rows: {}; {} of them within the cut",
                 spans.join(", "),
                 o.beside_runs
             );

@@ -319,6 +319,8 @@ impl<T: Real> PassSums<T> {
 pub(crate) struct Pass<'a, T: Real> {
     /// The drop rules and the screening ball.
     pub gate: &'a Gate<T>,
+    /// The spans of rows skipped ([`crate::runs`]).
+    pub runs: &'a Runs,
     /// Rows with `||u| - 1|` above this are left out (none when `None`).
     pub limit: Option<T>,
 }
@@ -367,9 +369,10 @@ fn sums<T: Real, S: Sample>(
     let mut buf = [[T::zero(); 4]; CHUNK];
     // The plain pass (every finite row, weight 1) needs neither the rules
     // nor the residuals: its loop is the cheaper one.
-    let runs = match &weighted {
-        Measure::Tails(_) => Runs::NONE,
-        Measure::Gated(pass, _) => pass.gate.runs,
+    // By reference: a copy took stack in the method's deepest frame.
+    let runs: &Runs = match &weighted {
+        Measure::Tails(_) => &Runs::NONE,
+        Measure::Gated(pass, _) => pass.runs,
     };
     for (_, block_prev, block) in runs.pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];

@@ -65,6 +65,7 @@ use crate::normalize::{Normalization, Projector, MIN_SAMPLES};
 use crate::offsets::{refit_offsets, Strength};
 use crate::quality::{self, DirectionSums, Figures, FinalPass, FinalSums};
 use crate::rules::{check, Drops, Gate, Rules};
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::{Calibration, Error, Quality, Real, Thresholds, Warnings};
 
@@ -813,7 +814,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             } => {
                 let (rows, end) = self.slice(pos);
                 let map = Projector::new(&prior.norm, &Vector3::zeros(), &prior.w);
-                sums.add(rows, &map, &plain, None, true);
+                sums.add(rows, &map, &plain, &Runs::NONE, None, true);
                 if end < self.store.len() {
                     return (
                         Stage::Prior {
@@ -942,6 +943,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                 let map = Projector::new(&prior.norm, &start.centre, &start.w);
                 let pass = Pass {
                     gate: &plain,
+                    runs: &Runs::NONE,
                     limit: Some(limit),
                 };
                 sums.add(rows, &map, &pass, &mut residuals);
@@ -1012,7 +1014,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             } => {
                 let (rows, end) = self.slice(pos);
                 let map = Projector::new(&prior.norm, &est.centre, &est.w);
-                sums.add(rows, &map, &plain, Some(limit), false);
+                sums.add(rows, &map, &plain, &Runs::NONE, Some(limit), false);
                 if end < self.store.len() {
                     let stage = Stage::Final {
                         prior,

@@ -478,10 +478,10 @@ fn pipeline<T: Real, S: Sample>(
 }
 
 /// What the steps before the method leave for it and for the judging.
-struct Start<T: Real> {
+struct Start<'r, T: Real> {
     norm: normalize::Normalization<T>,
     ls: ellipsoid::Ellipsoid<T>,
-    weights: methods::Weights<T>,
+    weights: methods::Weights<'r, T>,
     robust_passes: u32,
 }
 
@@ -531,14 +531,13 @@ fn plain_start<T: Real, S: Sample>(
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
-) -> Result<Start<T>, Error> {
+) -> Result<Start<'static, T>, Error> {
     let norm = scan.norm;
     // The rows the rules dropped stay out; without drops the scan's rules
     // are plain, and so are the loops.
     let gate = rules::Gate {
         rules: scan.rules,
         screen: None,
-        runs: crate::runs::Runs::NONE,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
@@ -557,6 +556,7 @@ fn plain_start<T: Real, S: Sample>(
         ls,
         weights: methods::Weights {
             gate,
+            runs: &runs::Runs::NONE,
             sigma: None,
             tails_limit: config
                 .robust
@@ -579,33 +579,64 @@ fn robust_path<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let mut figures = Figures::new(scan, config, true);
-    let start = robust_start(samples, config, scan, ls_solve, &mut figures)?;
-    let est = method_step(samples, config, &start, step, &figures)?;
-    finish(samples, config, &start, &est, &mut figures).map(|done| done.fit)
+    // The spans beside runs of rejected rows, which the weights refer to.
+    let mut runs = runs::Runs::NONE;
+    let start = robust_start(samples, config, scan, ls_solve, &mut figures, &mut runs)?;
+    robust_rest(samples, config, &start, step, &mut figures)
+}
+
+/// The robust path after its start: the method and the final pass. Out of
+/// line, as [`finish_fit`]: the method's estimate and the finished fit then
+/// take no stack while the robust start runs, nor the finished fit while
+/// the method runs.
+#[inline(never)]
+fn robust_rest<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    start: &Start<T>,
+    step: methods::Step<T, S>,
+    figures: &mut Figures<T>,
+) -> Result<Fit<T>, Error> {
+    let est = method_step(samples, config, start, step, figures)?;
+    finish_fit(samples, config, start, &est, figures)
+}
+
+/// [`finish`] for the robust path, which needs only the fit. Out of line:
+/// the finished fit then takes stack in this frame only, not in the
+/// robust path's while its start and the method run.
+#[inline(never)]
+fn finish_fit<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    start: &Start<T>,
+    est: &methods::Estimate<T>,
+    figures: &mut Figures<T>,
+) -> Result<Fit<T>, Error> {
+    finish(samples, config, start, est, figures).map(|done| done.fit)
 }
 
 /// The robust path up to the method: the screening and the robust LS fit,
 /// and the figures they give (into `figures`). Out of line: their moments and fits take
 /// stack only until the method starts.
 #[inline(never)]
-fn robust_start<T: Real, S: Sample>(
+fn robust_start<'r, T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
-) -> Result<Start<T>, Error> {
+    runs: &'r mut runs::Runs,
+) -> Result<Start<'r, T>, Error> {
     let screening = screen::screen(samples, scan)?;
     figures.drops = screening.drops;
     figures.valid = screening.valid;
     let gate = rules::Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
-        runs: crate::runs::Runs::NONE,
     };
     let crude = robust::crude_moments(samples, &screening, &gate);
     figures.flatness = Some(quality::flatness(&crude, crude.count())?);
-    let fitted = match robust::robust_ls(samples, &screening, &gate, &crude, ls_solve) {
+    let fitted = match robust::robust_ls(samples, &screening, &gate, &crude, ls_solve, runs) {
         Ok(f) => f,
         Err(e) => {
             // No ellipsoid at all: judged by the crude sphere's fit error.
@@ -620,7 +651,8 @@ fn robust_start<T: Real, S: Sample>(
         norm: screening.norm,
         ls: fitted.ls,
         weights: methods::Weights {
-            gate: fitted.gate,
+            gate,
+            runs,
             sigma: Some(fitted.sigma),
             tails_limit: None,
         },
@@ -689,6 +721,7 @@ fn finish<T: Real, S: Sample>(
         &est.w,
         est.directions,
         &start.weights.gate,
+        start.weights.runs,
         limit,
     ) {
         Ok(last) => last,
@@ -697,8 +730,8 @@ fn finish<T: Real, S: Sample>(
     figures.used = Some(last.used);
     // The rows beside runs (skipped by the passes) within the cut are no
     // outliers.
-    let gate = &start.weights.gate;
-    figures.beside = gate.runs.count(samples, |s, prev| {
+    let (gate, runs) = (&start.weights.gate, start.weights.runs);
+    figures.beside = runs.count(samples, |s, prev| {
         gate.pass(s, prev).is_some_and(|y| {
             limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l)
         })
@@ -714,7 +747,7 @@ fn finish<T: Real, S: Sample>(
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
-    let runs = start.weights.gate.runs;
+    let runs = *start.weights.runs;
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
         quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),

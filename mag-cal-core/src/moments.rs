@@ -10,7 +10,7 @@ use nalgebra::SMatrix;
 use crate::histogram::LogHistogram;
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{check, every, Gate, Rules};
-use crate::runs::{RunFinder, STRONG};
+use crate::runs::{RunFinder, Runs, STRONG};
 use crate::sample::Sample;
 use crate::Real;
 
@@ -134,23 +134,27 @@ impl<T: Real> Moments<T> {
         if gate.is_plain() && cut.is_none() && stride <= 1 {
             return Self::accumulate(samples, norm);
         }
-        Self::accumulate_finding(samples, norm, gate, cut, hist, stride, None)
+        Self::accumulate_finding(samples, norm, gate, &Runs::NONE, cut, hist, stride, None)
     }
 
-    /// [`Moments::accumulate_every`] that also hands each row the cut
-    /// rejects to `finder`, which finds the runs of such rows.
+    /// [`Moments::accumulate_every`] outside the spans of `skip` that, with
+    /// `runs`, also finds the runs of rows far beyond the cut and writes
+    /// them there ([`crate::runs`]).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn accumulate_finding<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
         gate: &Gate<T>,
+        skip: &Runs,
         cut: Option<&Cut<T>>,
         mut hist: Option<&mut LogHistogram>,
         stride: usize,
-        mut finder: Option<&mut RunFinder>,
+        runs: Option<&mut Runs>,
     ) -> Self {
+        let mut finder = runs.map(RunFinder::new);
         let mut sums = [T::zero(); COUNT];
         let (low, high) = sums.split_at_mut(LOW);
-        for (start, prev, block) in gate.runs.pieces(samples, BLOCK) {
+        for (start, prev, block) in skip.pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
             let kept = select(
                 block,
@@ -160,7 +164,7 @@ impl<T: Real> Moments<T> {
                 hist.as_deref_mut(),
                 &mut mask,
                 stride,
-                finder.as_deref_mut().map(|f| (start, f)),
+                finder.as_mut().map(|f| (start, f)),
             );
             let mut a = sum_low(block, norm, &mask);
             a[0] = T::from_count(kept);
@@ -170,6 +174,9 @@ impl<T: Real> Moments<T> {
             for (t, v) in high.iter_mut().zip(sum_high(block, norm, &mask)) {
                 *t += v;
             }
+        }
+        if let Some(f) = finder {
+            f.finish(samples, |s, prev| gate.pass(s, prev).is_some());
         }
         Self { sums }
     }
@@ -328,7 +335,7 @@ fn select<T: Real, S: Sample>(
     mut hist: Option<&mut LogHistogram>,
     mask: &mut [u32; MASK_WORDS],
     stride: usize,
-    mut finder: Option<(usize, &mut RunFinder)>,
+    mut finder: Option<(usize, &mut RunFinder<'_>)>,
 ) -> usize {
     let half = T::lit(0.5);
     // The cut by value: its constants then stay in registers rather than

@@ -93,7 +93,6 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
             rules
         },
         screen: None,
-        runs: crate::runs::Runs::NONE,
     };
     // The first kept sample is the origin; the loop runs over the rest.
     let mut prev = None;

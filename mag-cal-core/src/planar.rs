@@ -60,7 +60,7 @@ use crate::histogram::LogHistogram;
 use crate::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
 use crate::methods::{robust_sigma, OUTLIER_CUT};
 use crate::normalize::{scan, MIN_SAMPLES};
-use crate::rules::{Drops, Gate};
+use crate::rules::{pieces, Drops, Gate};
 use crate::sample::Sample;
 use crate::screen::screen;
 use crate::{Error, Figure, Real, CLEAN_LIMIT};
@@ -329,7 +329,6 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
-        runs: crate::runs::Runs::NONE,
     };
     let mut passes = SCAN_PASSES + screening.passes;
     let norm = screening.norm;
@@ -554,7 +553,7 @@ impl<T: Real, S: Sample> Rows<'_, T, S> {
     #[inline(always)]
     fn each(&self, mut f: impl FnMut([T; 3])) {
         let (c, k) = (self.centre, self.inv_scale);
-        for (prev, block) in self.gate.pieces(self.samples, crate::moments::BLOCK) {
+        for (prev, block) in pieces(self.samples, crate::moments::BLOCK) {
             for y in self.gate.rows(block, prev) {
                 f([(y[0] - c[0]) * k, (y[1] - c[1]) * k, (y[2] - c[2]) * k]);
             }

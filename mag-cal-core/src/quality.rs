@@ -13,6 +13,7 @@ use crate::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
 use crate::moments::{Moments, BLOCK};
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{Filter, Finite, Gate};
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::{Error, Figure, Real};
 
@@ -603,13 +604,14 @@ fn lack_of_fit<T: Real>(cells: &Cells<T>, sigma: T) -> (T, bool) {
 }
 
 /// One pass with the final calibration (normalised coordinates) over the
-/// rows `gate` passes: the robust sigma and the largest of the radial
+/// rows `gate` passes outside the spans of `runs`: the robust sigma and the largest of the radial
 /// residuals `r = |u| - 1` with `u = W' (x - b')`; the rows within `limit`
 /// (all when `None`) are the rows used, and give the RMS of `r`, the
 /// lack-of-fit figure, and the coverage and Gram condition of their
 /// directions `h = u / |u|`, or of `directions` when given (then the pass
 /// need not sum the directions). Out of line: its histogram and cells
 /// take stack only while it runs.
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub(crate) fn final_pass<T: Real, S: Sample>(
     samples: &[S],
@@ -618,11 +620,12 @@ pub(crate) fn final_pass<T: Real, S: Sample>(
     w: &Matrix3<T>,
     directions: Option<DirectionSums<T>>,
     gate: &Gate<T>,
+    runs: &Runs,
     limit: Option<T>,
 ) -> Result<FinalPass<T>, Error> {
     let map = Projector::new(norm, centre, w);
     let mut sums = FinalSums::new();
-    sums.add(samples, &map, gate, limit, directions.is_none());
+    sums.add(samples, &map, gate, runs, limit, directions.is_none());
     sums.finish(directions)
 }
 
@@ -649,13 +652,15 @@ impl<T: Real> FinalSums<T> {
         }
     }
 
-    /// Adds the rows of `samples` the gate passes, under `map`, with the
-    /// residual `limit`; sums their directions when `directions` is set.
+    /// Adds the rows of `samples` the gate passes outside the spans of
+    /// `runs`, under `map`, with the residual `limit`; sums their
+    /// directions when `directions` is set.
     pub(crate) fn add<S: Sample>(
         &mut self,
         samples: &[S],
         map: &Projector<T>,
         gate: &Gate<T>,
+        runs: &Runs,
         limit: Option<T>,
         directions: bool,
     ) {
@@ -665,7 +670,7 @@ impl<T: Real> FinalSums<T> {
             directions,
         };
         let (hist, cells, acc) = (&mut self.hist, &mut self.cells, &mut self.acc);
-        for (prev, block) in gate.pieces(samples, BLOCK) {
+        for (_, prev, block) in runs.pieces(samples, BLOCK) {
             if gate.is_plain() {
                 final_block(block, prev, &Finite, &spec, hist, cells, acc);
             } else {

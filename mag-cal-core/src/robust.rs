@@ -49,7 +49,7 @@ use crate::methods::{robust_sigma, OUTLIER_CUT};
 use crate::moments::{Cut, Moments};
 use crate::normalize::Projector;
 use crate::rules::Gate;
-use crate::runs::RunFinder;
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::screen::{stride, Screening};
 use crate::{Error, Real};
@@ -90,9 +90,6 @@ pub(crate) struct RobustLs<T: Real> {
     pub sigma: T,
     /// Passes over the samples.
     pub passes: u32,
-    /// The gate with the spans beside runs of rejected rows
-    /// ([`crate::runs`]), for the method's passes.
-    pub gate: Gate<T>,
 }
 
 /// The LS fit of `moments`. Out of line: the 10x10 scatter takes stack
@@ -113,18 +110,21 @@ struct Spread<T: Real> {
 }
 
 /// One weighted LS refit pass: the moments of the rows whose algebraic
-/// residual under `ls` is within `limit`, and what the residuals under
-/// `ls` measure (for the next pass). Out of line: its histogram takes
-/// stack only during the pass.
+/// residual under `ls` is within `limit`, what the residuals under `ls`
+/// measure (for the next pass), and into `runs`, when given, the runs of
+/// rows far beyond the limit ([`crate::runs`]). Out of line: its histogram
+/// takes stack only during the pass.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn weighted_moments<T: Real, S: Sample>(
     samples: &[S],
     screening: &Screening<T>,
     gate: &Gate<T>,
+    skip: &Runs,
     ls: &Ellipsoid<T>,
     limit: T,
     stride: usize,
-    finder: Option<&mut RunFinder>,
+    runs: Option<&mut Runs>,
 ) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
@@ -136,10 +136,11 @@ fn weighted_moments<T: Real, S: Sample>(
         samples,
         norm,
         gate,
+        skip,
         Some(&cut),
         Some(&mut hist),
         stride,
-        finder,
+        runs,
     );
     let measured = robust_sigma(&hist)
         .zip(hist.quantile(T::lit(TRIM_SHARE)))
@@ -171,7 +172,9 @@ pub(crate) fn crude_moments<T: Real, S: Sample>(
 }
 
 /// The robust LS fit from the crude start's moments `crude` (one pass
-/// already made), over the rows `gate` passes. Out of line: its
+/// already made), over the rows `gate` passes; writes into `runs` the
+/// spans beside runs of rejected rows ([`crate::runs`]), which the later
+/// refits skip, as the method's passes will. Out of line: its
 /// histogram and scatter take stack only while it runs, not during the
 /// method's passes.
 #[inline(never)]
@@ -181,12 +184,12 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     gate: &Gate<T>,
     crude: &Moments<T>,
     solve: Solve<T>,
+    runs: &mut Runs,
 ) -> Result<RobustLs<T>, Error> {
     let mut moments = *crude;
     let mut passes = 1;
     let mut ls = fit_moments(&moments, solve)?;
     let mut sigma = screening.sphere_error;
-    let mut gate = *gate;
     let mut found = false;
     // The crude start's pass measured no residuals: no trimming yet.
     let mut trim = None;
@@ -211,14 +214,19 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             // The first refit on every row after two refits finds the runs
             // of rejected rows; the passes after it skip the rows beside
             // them.
-            let mut finder = (rows == 1 && passes >= 3 && !found).then(RunFinder::new);
+            let find = rows == 1 && passes >= 3 && !found;
+            // The finding pass skips nothing and writes the runs in place.
+            let (skip, out) = if find {
+                (&Runs::NONE, Some(&mut *runs))
+            } else {
+                (&*runs, None)
+            };
             let (m, measured) =
-                weighted_moments(samples, screening, &gate, &ls, limit, rows, finder.as_mut());
+                weighted_moments(samples, screening, gate, skip, &ls, limit, rows, out);
             passes += 1;
-            let just_found = finder.is_some();
-            if let Some(f) = finder {
+            let just_found = find;
+            if find {
                 found = true;
-                gate.runs = f.finish(samples, |s, prev| gate.pass(s, prev).is_some());
             }
             if let Some(r) = measured {
                 sigma = r.sigma;
@@ -249,6 +257,5 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
         moments,
         sigma,
         passes,
-        gate,
     })
 }

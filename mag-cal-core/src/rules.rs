@@ -257,8 +257,6 @@ pub(crate) struct Gate<T: Real> {
     pub rules: Rules<T>,
     /// Samples outside are screened out.
     pub screen: Option<Ball<T>>,
-    /// Rows beside runs of rejected rows, skipped.
-    pub runs: Runs,
 }
 
 impl<T: Real> Gate<T> {
@@ -266,22 +264,7 @@ impl<T: Real> Gate<T> {
     pub(crate) const PLAIN: Self = Self {
         rules: Rules::PLAIN,
         screen: None,
-        runs: Runs::NONE,
     };
-
-    /// The pieces of `samples` the gate's passes visit (outside the spans
-    /// of [`Gate::runs`]), each at most `size` rows, with the row before
-    /// each.
-    #[inline(always)]
-    pub(crate) fn pieces<'a, S>(
-        &'a self,
-        samples: &'a [S],
-        size: usize,
-    ) -> impl Iterator<Item = (Option<&'a S>, &'a [S])> + 'a {
-        self.runs
-            .pieces(samples, size)
-            .map(|(_, prev, piece)| (prev, piece))
-    }
 
     /// Whether the gate passes every finite, representable row.
     pub(crate) fn is_plain(&self) -> bool {
@@ -424,7 +407,6 @@ impl<T: Real> Selection<T> {
                 centre,
                 radius_sq: r * r,
             }),
-            runs: self.runs,
         }
     }
 
@@ -457,8 +439,8 @@ impl<T: Real> Selection<T> {
         let Gate {
             rules,
             screen: ball,
-            runs,
         } = self.gate();
+        let runs = self.runs;
         let mut prev = None;
         samples.iter().enumerate().map(move |(i, s)| {
             let row = check::<T, S>(s, prev, &rules);
@@ -622,7 +604,6 @@ mod tests {
             [3.0, 3.0, 1.0],
         ];
         let gate = Gate::<f32> {
-            runs: Runs::NONE,
             rules: Rules::GLITCHES,
             screen: Some(Ball {
                 centre: [0.0; 3],

@@ -48,8 +48,11 @@ pub const STRONG: f64 = 3.0;
 /// and 53).
 pub const MARGIN: usize = 30;
 
-/// The most spans kept.
-pub const RUNS: usize = 8;
+/// The most spans kept. Each span costs 8 bytes in every copy of the
+/// spans (the report's [`crate::Selection`], the robust path's weights):
+/// with 4, LS9 + ADC2 on contaminated data took 4 108 bytes of stack on a
+/// Cortex-M4F, over its 4 KiB budget; with 2, 4 076.
+pub const RUNS: usize = 2;
 
 /// The spans of rows left out beside runs of rejected rows: half-open
 /// ranges `start..end` of row indices, ascending and disjoint.
@@ -178,23 +181,26 @@ impl Runs {
 }
 
 /// Finds the spans from the rows rejected by their residual, given in
-/// ascending order.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RunFinder {
+/// ascending order, and writes them into the caller's [`Runs`] (not a copy
+/// of its own: the finder lives in the deepest frame of its pass).
+#[derive(Debug)]
+pub(crate) struct RunFinder<'a> {
     /// The first and the last row of the latest stretch of consecutive
     /// rejected rows.
     stretch: Option<(usize, usize)>,
     /// The span still growing.
     open: Option<(usize, usize)>,
-    runs: Runs,
+    runs: &'a mut Runs,
 }
 
-impl RunFinder {
-    pub(crate) const fn new() -> Self {
+impl<'a> RunFinder<'a> {
+    /// A finder that writes into `runs` (cleared).
+    pub(crate) fn new(runs: &'a mut Runs) -> Self {
+        *runs = Runs::NONE;
         Self {
             stretch: None,
             open: None,
-            runs: Runs::NONE,
+            runs,
         }
     }
 
@@ -232,36 +238,47 @@ impl RunFinder {
         }
     }
 
-    /// The spans, clipped to the rows of `samples`, with the count of their
-    /// rows for which `keep(row, row before)` holds (those the rules and
-    /// the screening pass).
-    pub(crate) fn finish<S>(
-        mut self,
-        samples: &[S],
-        keep: impl FnMut(&S, Option<&S>) -> bool,
-    ) -> Runs {
+    /// Closes the last span, clips the spans to the rows of `samples`, and
+    /// counts their rows for which `keep(row, row before)` holds (those the
+    /// rules and the screening pass). Out of line: the count's loop then
+    /// takes no stack in the refit pass that calls it.
+    #[inline(never)]
+    pub(crate) fn finish<S>(mut self, samples: &[S], keep: impl FnMut(&S, Option<&S>) -> bool) {
         if let Some(open) = self.open.take() {
             self.close(open);
         }
-        let mut runs = Runs {
-            missed: self.runs.missed,
-            ..Runs::NONE
-        };
-        for &(s, e) in self.runs.spans() {
-            let e = e.min(samples.len());
-            if let Some(slot) = runs.spans.get_mut(runs.len).filter(|_| s < e) {
-                *slot = (s, e);
-                runs.len += 1;
+        let runs = self.runs;
+        // The spans ascend: those past the end are the last ones.
+        let mut kept = 0;
+        for span in runs.spans.iter_mut().take(runs.len) {
+            span.1 = span.1.min(samples.len());
+            if span.0 < span.1 {
+                kept += 1;
             }
         }
+        runs.len = kept;
         runs.rows = runs.count(samples, keep);
-        runs
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The runs found from the rejected rows `rejected` over `samples`.
+    fn found<S>(
+        samples: &[S],
+        rejected: impl IntoIterator<Item = usize>,
+        keep: impl FnMut(&S, Option<&S>) -> bool,
+    ) -> Runs {
+        let mut runs = Runs::NONE;
+        let mut f = RunFinder::new(&mut runs);
+        for i in rejected {
+            f.reject(i);
+        }
+        f.finish(samples, keep);
+        runs
+    }
 
     /// `RUN_LENGTH` consecutive rows from `first`.
     fn run(first: usize) -> core::ops::Range<usize> {
@@ -271,21 +288,14 @@ mod tests {
     #[test]
     fn scattered_rejections_are_no_run() {
         // One row short of a run, and rows apart by one.
-        let mut f = RunFinder::new();
-        for i in (100..100 + RUN_LENGTH - 1).chain((200..240).step_by(2)) {
-            f.reject(i);
-        }
-        let runs = f.finish(&[0u8; 300], |_, _| true);
+        let rejected = (100..100 + RUN_LENGTH - 1).chain((200..240).step_by(2));
+        let runs = found(&[0u8; 300], rejected, |_, _| true);
         assert!(runs.is_empty(), "{runs:?}");
     }
 
     #[test]
     fn consecutive_rejections_are_a_run() {
-        let mut f = RunFinder::new();
-        for i in 100..100 + RUN_LENGTH + 3 {
-            f.reject(i);
-        }
-        let runs = f.finish(&[0u8; 1000], |_, _| true);
+        let runs = found(&[0u8; 1000], 100..100 + RUN_LENGTH + 3, |_, _| true);
         let span = (100 - MARGIN, 100 + RUN_LENGTH + 3 + MARGIN);
         assert_eq!(runs.spans(), &[span]);
         assert_eq!(runs.rows(), span.1 - span.0);
@@ -293,15 +303,11 @@ mod tests {
 
     #[test]
     fn touching_runs_merge_and_spans_stop_at_the_ends() {
-        let mut f = RunFinder::new();
-        for i in run(1)
+        let rejected = run(1)
             .chain(run(1 + RUN_LENGTH + 2 * MARGIN))
-            .chain(run(995))
-        {
-            f.reject(i);
-        }
+            .chain(run(995));
         let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
-        let runs = f.finish(&rows, |&row, _| row % 10 == 0);
+        let runs = found(&rows, rejected, |&row, _| row % 10 == 0);
         let end = 1 + 2 * RUN_LENGTH + 3 * MARGIN;
         assert_eq!(runs.spans(), &[(0, end), (995 - MARGIN, 1000)]);
         // Every tenth row: 11 in the first span, 970, 980 and 990 in the second.
@@ -310,11 +316,8 @@ mod tests {
 
     #[test]
     fn runs_beyond_the_capacity_are_counted() {
-        let mut f = RunFinder::new();
-        for i in (0..RUNS + 2).flat_map(|k| run(k * 1000)) {
-            f.reject(i);
-        }
-        let runs = f.finish(&[0u8; 100_000], |_, _| true);
+        let rejected = (0..RUNS + 2).flat_map(|k| run(k * 1000));
+        let runs = found(&[0u8; 100_000], rejected, |_, _| true);
         assert_eq!(runs.spans().len(), RUNS);
         assert_eq!(runs.missed(), 2);
     }
@@ -322,21 +325,24 @@ mod tests {
     #[test]
     fn the_pieces_skip_the_spans() {
         let rows: [usize; 100] = core::array::from_fn(|i| i);
-        let runs = Runs::from_spans(&[(0, 5), (20, 30), (95, 120)]).unwrap();
-        let mut next = 0;
-        for (start, prev, piece) in runs.pieces(&rows, 8) {
-            assert_eq!(prev, start.checked_sub(1).map(|j| &rows[j]));
-            assert!(piece.len() <= 8);
-            for &i in piece {
-                // Every row outside the spans, once, in order.
-                while runs.contains(next) {
+        for (spans, last) in [([(0, 5), (95, 120)], 95), ([(20, 30), (31, 33)], 100)] {
+            let runs = Runs::from_spans(&spans).unwrap();
+            let mut next = 0;
+            for (start, prev, piece) in runs.pieces(&rows, 8) {
+                assert_eq!(prev, start.checked_sub(1).map(|j| &rows[j]));
+                assert!(piece.len() <= 8);
+                for &i in piece {
+                    // Every row outside the spans, once, in order.
+                    while runs.contains(next) {
+                        next += 1;
+                    }
+                    assert_eq!(i, next);
                     next += 1;
                 }
-                assert_eq!(i, next);
-                next += 1;
             }
+            assert_eq!(next, last, "{spans:?}");
         }
-        assert_eq!(next, 95);
+        assert!(Runs::from_spans(&[(0, 5), (20, 30), (95, 120)][..RUNS + 1]).is_none());
         let mut ends = Runs::NONE.pieces(&rows, 32).map(|(s, _, p)| s + p.len());
         assert!([32, 64, 96, 100].into_iter().eq(ends.by_ref()));
     }

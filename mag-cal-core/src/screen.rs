@@ -141,7 +141,6 @@ pub(crate) fn screen<T: Real, S: Sample>(
     let gate = Gate {
         rules,
         screen: None,
-        runs: crate::runs::Runs::NONE,
     };
     if !(spread > T::zero()) || !spread.is_finite() {
         return Err(Error::AllSamplesEqual);
@@ -263,7 +262,6 @@ fn shell<T: Real, S: Sample>(
     let inside = Gate {
         rules,
         screen: Some(ball),
-        runs: crate::runs::Runs::NONE,
     };
     let inv_m = T::one() / m;
     let mut h = LogHistogram::new();
@@ -366,7 +364,6 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     let rows = Gate {
         rules: scan.rules,
         screen: None,
-        runs: crate::runs::Runs::NONE,
     };
     // The window of the first histograms: the bounds of the subsample
     // (rows beyond them count below or above the window; a clip level is
@@ -389,7 +386,6 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
         let gate = Gate {
             rules,
             screen: None,
-            runs: crate::runs::Runs::NONE,
         };
         if passes == 0 {
             let mut at = [[0usize; 2]; 3];

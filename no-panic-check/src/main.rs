@@ -193,7 +193,7 @@ static SCALARS_F64: Scalars<f64> = Scalars {
 };
 
 /// Spans for `Runs::from_spans` (a selection read back from storage).
-static BUF_SPANS: [(usize, usize); 3] = [(3, 9), (20, 21), (usize::MAX - 1, usize::MAX)];
+static BUF_SPANS: [(usize, usize); 2] = [(3, 9), (usize::MAX - 1, usize::MAX)];
 static SPANS: RawSlice<(usize, usize)> = RawSlice::of(&BUF_SPANS);
 
 /// Bytes for `persist::from_bytes` and `crc32`.

@@ -10,6 +10,7 @@ use crate::linalg::larger;
 use crate::normalize::Normalization;
 use crate::quality::DirectionSums;
 use crate::rules::Gate;
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::screen::MAD_TO_SIGMA;
 use crate::{Config, Error, Real, Warnings};
@@ -125,8 +126,12 @@ pub(crate) fn ls_only<T: Real, S: Sample>(
 /// hard cut at [`OUTLIER_CUT`]` sigma` on the radial residual
 /// `||u| - 1|` under each pass's start.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Weights<T: Real> {
+pub(crate) struct Weights<'r, T: Real> {
     pub gate: Gate<T>,
+    /// The spans of rows beside runs of rejected rows, skipped
+    /// ([`crate::runs`]). By reference: the weights are copied in the
+    /// methods' frames, which are the deepest of the robust path.
+    pub runs: &'r Runs,
     /// Robust standard deviation of the radial residuals under the start
     /// (from the previous pass: the weights lag one pass).
     pub sigma: Option<T>,
@@ -137,14 +142,17 @@ pub(crate) struct Weights<T: Real> {
     pub tails_limit: Option<(T, T)>,
 }
 
-impl<T: Real> Weights<T> {
+impl<T: Real> Weights<'static, T> {
     /// Every finite row, weight 1: the plain methods.
     pub(crate) const PLAIN: Self = Self {
         gate: Gate::PLAIN,
+        runs: &Runs::NONE,
         sigma: None,
         tails_limit: None,
     };
+}
 
+impl<T: Real> Weights<'_, T> {
     /// The residual limit, [`OUTLIER_CUT`] robust standard deviations.
     pub(crate) fn limit(&self) -> Option<T> {
         self.sigma.map(|s| s * T::lit(OUTLIER_CUT))
@@ -154,6 +162,7 @@ impl<T: Real> Weights<T> {
     pub(crate) fn with_sigma(&self, sigma: Option<T>) -> Self {
         Self {
             gate: self.gate,
+            runs: self.runs,
             sigma,
             tails_limit: self.tails_limit,
         }
@@ -205,6 +214,7 @@ fn measured_stats<T: Real, S: Sample>(
     let mut res = Residuals::new();
     let pass = Pass {
         gate: &weights.gate,
+        runs: weights.runs,
         limit: weights.limit(),
     };
     let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;

@@ -34,6 +34,7 @@ use crate::moments::BLOCK;
 use crate::normalize::Normalization;
 use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
 use crate::rules::Gate;
+use crate::runs::Runs;
 use crate::sample::Sample;
 use crate::{Config, Error, Real, Warnings};
 
@@ -59,21 +60,29 @@ pub struct SubMleObjective<'a, T: Real, S: Sample> {
     samples: &'a [S],
     norm: &'a Normalization<T>,
     gate: Gate<T>,
+    runs: Runs,
 }
 
 impl<'a, T: Real, S: Sample> SubMleObjective<'a, T, S> {
     /// The objective over `samples`.
     #[cfg(test)]
     pub fn new(samples: &'a [S], norm: &'a Normalization<T>) -> Self {
-        Self::gated(samples, norm, Gate::PLAIN)
+        Self::gated(samples, norm, Gate::PLAIN, Runs::NONE)
     }
 
-    /// The objective over the rows `gate` passes.
-    pub(crate) fn gated(samples: &'a [S], norm: &'a Normalization<T>, gate: Gate<T>) -> Self {
+    /// The objective over the rows `gate` passes outside the spans of
+    /// `runs`.
+    pub(crate) fn gated(
+        samples: &'a [S],
+        norm: &'a Normalization<T>,
+        gate: Gate<T>,
+        runs: Runs,
+    ) -> Self {
         Self {
             samples,
             norm,
             gate,
+            runs,
         }
     }
 }
@@ -86,7 +95,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let mut cost = T::zero();
         let mut dm = Matrix3::zeros();
         let mut db = Vector3::zeros();
-        for (prev, block) in self.gate.pieces(self.samples, BLOCK) {
+        for (_, prev, block) in self.runs.pieces(self.samples, BLOCK) {
             let (mut c_blk, mut dm_blk, mut db_blk) =
                 (T::zero(), Matrix3::zeros(), Vector3::zeros());
             for y in self.gate.rows(block, prev) {
@@ -130,7 +139,7 @@ pub(crate) fn step<T: Real, S: Sample>(
     // storage it is L^T, the upper factor.
     let a0 = from_columns(cholesky(&columns_of(&ls.m)).ok_or(Error::NotAnEllipsoid)?);
     let x0 = pack(&a0, &ls.centre);
-    let objective = SubMleObjective::gated(samples, norm, weights.gate);
+    let objective = SubMleObjective::gated(samples, norm, weights.gate, *weights.runs);
     // The paper's stop: a step below 1e-6 of the parameter scale. The
     // gradient test only ends exact fits (noise-free data: J = 0 at the
     // LS start already).
