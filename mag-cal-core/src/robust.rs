@@ -224,10 +224,7 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             let (m, measured) =
                 weighted_moments(samples, screening, gate, skip, &ls, limit, rows, out);
             passes += 1;
-            let just_found = find;
-            if find {
-                found = true;
-            }
+            found |= find;
             if let Some(r) = measured {
                 sigma = r.sigma;
                 trim = Some(r.trim);
@@ -249,7 +246,7 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
                 break;
             }
             // A count before rows were left out says nothing of the next.
-            last_kept = (trimmed.is_none() && !just_found).then_some(kept);
+            last_kept = (trimmed.is_none() && !find).then_some(kept);
         }
     }
     Ok(RobustLs {
