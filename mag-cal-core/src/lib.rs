@@ -728,13 +728,18 @@ fn finish<T: Real, S: Sample>(
         Err(e) => return Err(judge_failure(figures, config, e)),
     };
     figures.used = Some(last.used);
-    // The rows beside runs (skipped by the passes) within the cut are no
-    // outliers.
+    // The rows of the spans beside runs, which the passes skipped: those
+    // the gate passes count as rejected, and those of them within the cut
+    // are no outliers.
     let (gate, runs) = (&start.weights.gate, start.weights.runs);
-    figures.beside = runs.count(samples, |s, prev| {
-        gate.pass(s, prev).is_some_and(|y| {
-            limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l)
-        })
+    let mut spanned = 0usize;
+    figures.beside = 0;
+    runs.visit(samples, |s, prev| {
+        if let Some(y) = gate.pass(s, prev) {
+            spanned += 1;
+            let within = limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l);
+            figures.beside += usize::from(within);
+        }
     });
     figures.coverage = Some(last.coverage);
     figures.gram_condition = Some(last.gram_condition);
@@ -747,7 +752,6 @@ fn finish<T: Real, S: Sample>(
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
-    let runs = *start.weights.runs;
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
         quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
@@ -767,15 +771,13 @@ fn finish<T: Real, S: Sample>(
         samples_used: last.used,
         samples_dropped: figures.drops.total(),
         drops: figures.drops,
-        // The rows beside runs of rejected rows, which the passes skip,
-        // count as rejected.
         screened: figures
             .valid
             .saturating_sub(last.passed)
-            .saturating_sub(runs.rows()),
+            .saturating_sub(spanned),
         rejected: last
             .passed
-            .saturating_add(runs.rows())
+            .saturating_add(spanned)
             .saturating_sub(last.used),
         beside_runs: figures.beside,
         radial_rms: last.radial_rms,
@@ -793,7 +795,7 @@ fn finish<T: Real, S: Sample>(
                 .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
             screen: start.weights.gate.screen.as_ref().map(to_sensor),
             residual_limit: limit,
-            runs,
+            runs: *runs,
         },
     };
     Ok(Finished {

@@ -69,7 +69,6 @@ pub const RUNS: usize = 2;
 pub struct Runs {
     spans: [(usize, usize); RUNS],
     len: usize,
-    rows: usize,
     missed: usize,
 }
 
@@ -84,7 +83,6 @@ impl Runs {
     pub const NONE: Self = Self {
         spans: [(0, 0); RUNS],
         len: 0,
-        rows: 0,
         missed: 0,
     };
 
@@ -124,27 +122,15 @@ impl Runs {
         self.missed
     }
 
-    /// Rows in the spans that the rules and the screening passed (the
-    /// report counts them as rejected).
-    pub(crate) fn rows(&self) -> usize {
-        self.rows
-    }
-
-    /// The rows of the spans for which `keep(row, row before)` holds.
-    pub(crate) fn count<S>(
-        &self,
-        samples: &[S],
-        mut keep: impl FnMut(&S, Option<&S>) -> bool,
-    ) -> usize {
-        let mut n = 0usize;
+    /// Calls `visit(row, row before)` on every row of the spans.
+    pub(crate) fn visit<S>(&self, samples: &[S], mut visit: impl FnMut(&S, Option<&S>)) {
         for &(s, e) in self.spans() {
             let mut prev = s.checked_sub(1).and_then(|j| samples.get(j));
             for row in samples.get(s..e).unwrap_or(&[]) {
-                n += usize::from(keep(row, prev));
+                visit(row, prev);
                 prev = Some(row);
             }
         }
-        n
     }
 
     /// The pieces of `samples` outside the spans, each at most `size` rows,
@@ -238,12 +224,8 @@ impl<'a> RunFinder<'a> {
         }
     }
 
-    /// Closes the last span, clips the spans to the rows of `samples`, and
-    /// counts their rows for which `keep(row, row before)` holds (those the
-    /// rules and the screening pass). Out of line: the count's loop then
-    /// takes no stack in the refit pass that calls it.
-    #[inline(never)]
-    pub(crate) fn finish<S>(mut self, samples: &[S], keep: impl FnMut(&S, Option<&S>) -> bool) {
+    /// Closes the last span and clips the spans to `rows` rows.
+    pub(crate) fn finish(mut self, rows: usize) {
         if let Some(open) = self.open.take() {
             self.close(open);
         }
@@ -251,13 +233,12 @@ impl<'a> RunFinder<'a> {
         // The spans ascend: those past the end are the last ones.
         let mut kept = 0;
         for span in runs.spans.iter_mut().take(runs.len) {
-            span.1 = span.1.min(samples.len());
+            span.1 = span.1.min(rows);
             if span.0 < span.1 {
                 kept += 1;
             }
         }
         runs.len = kept;
-        runs.rows = runs.count(samples, keep);
     }
 }
 
@@ -265,18 +246,14 @@ impl<'a> RunFinder<'a> {
 mod tests {
     use super::*;
 
-    /// The runs found from the rejected rows `rejected` over `samples`.
-    fn found<S>(
-        samples: &[S],
-        rejected: impl IntoIterator<Item = usize>,
-        keep: impl FnMut(&S, Option<&S>) -> bool,
-    ) -> Runs {
+    /// The runs found from the rejected rows `rejected` of `rows` rows.
+    fn found(rows: usize, rejected: impl IntoIterator<Item = usize>) -> Runs {
         let mut runs = Runs::NONE;
         let mut f = RunFinder::new(&mut runs);
         for i in rejected {
             f.reject(i);
         }
-        f.finish(samples, keep);
+        f.finish(rows);
         runs
     }
 
@@ -289,16 +266,15 @@ mod tests {
     fn scattered_rejections_are_no_run() {
         // One row short of a run, and rows apart by one.
         let rejected = (100..100 + RUN_LENGTH - 1).chain((200..240).step_by(2));
-        let runs = found(&[0u8; 300], rejected, |_, _| true);
+        let runs = found(300, rejected);
         assert!(runs.is_empty(), "{runs:?}");
     }
 
     #[test]
     fn consecutive_rejections_are_a_run() {
-        let runs = found(&[0u8; 1000], 100..100 + RUN_LENGTH + 3, |_, _| true);
+        let runs = found(1000, 100..100 + RUN_LENGTH + 3);
         let span = (100 - MARGIN, 100 + RUN_LENGTH + 3 + MARGIN);
         assert_eq!(runs.spans(), &[span]);
-        assert_eq!(runs.rows(), span.1 - span.0);
     }
 
     #[test]
@@ -306,18 +282,26 @@ mod tests {
         let rejected = run(1)
             .chain(run(1 + RUN_LENGTH + 2 * MARGIN))
             .chain(run(995));
-        let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
-        let runs = found(&rows, rejected, |&row, _| row % 10 == 0);
+        let runs = found(1000, rejected);
         let end = 1 + 2 * RUN_LENGTH + 3 * MARGIN;
         assert_eq!(runs.spans(), &[(0, end), (995 - MARGIN, 1000)]);
-        // Every tenth row: 11 in the first span, 970, 980 and 990 in the second.
-        assert_eq!(runs.rows(), end.div_ceil(10) + 3);
+        // Each row of the spans once, with the row before it.
+        let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
+        let (mut seen, mut tenth) = (0, 0);
+        runs.visit(&rows, |&row, prev| {
+            assert_eq!(prev.copied(), row.checked_sub(1));
+            seen += 1;
+            tenth += usize::from(row % 10 == 0);
+        });
+        assert_eq!(seen, end + MARGIN + 5);
+        // 11 in the first span; 970, 980 and 990 in the second.
+        assert_eq!(tenth, end.div_ceil(10) + 3);
     }
 
     #[test]
     fn runs_beyond_the_capacity_are_counted() {
         let rejected = (0..RUNS + 2).flat_map(|k| run(k * 1000));
-        let runs = found(&[0u8; 100_000], rejected, |_, _| true);
+        let runs = found(100_000, rejected);
         assert_eq!(runs.spans().len(), RUNS);
         assert_eq!(runs.missed(), 2);
     }
@@ -342,7 +326,9 @@ mod tests {
             }
             assert_eq!(next, last, "{spans:?}");
         }
-        assert!(Runs::from_spans(&[(0, 5), (20, 30), (95, 120)][..RUNS + 1]).is_none());
+        let too_many: [(usize, usize); RUNS + 1] = core::array::from_fn(|k| (10 * k, 10 * k + 5));
+        assert!(Runs::from_spans(&too_many).is_none());
+        assert!(Runs::from_spans(&too_many[..RUNS]).is_some());
         let mut ends = Runs::NONE.pieces(&rows, 32).map(|(s, _, p)| s + p.len());
         assert!([32, 64, 96, 100].into_iter().eq(ends.by_ref()));
     }
