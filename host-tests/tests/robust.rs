@@ -430,3 +430,81 @@ fn samples_crowded_on_one_side_are_calibrated() {
         );
     }
 }
+
+/// A fifth of the rows displaced as one stretch (a patch by 0.3 of the
+/// field, or a disturbance moving past, peak 0.5), 64 runs a setting (256
+/// a cell), robust ADC2 and iterated ADC2, f32 and f64: at least 97 % of
+/// the runs accepted and at most 1 % silently wrong (the target at 20-30 %
+/// is 2 %; measured 99.2-100 % and 0-0.8 %). The fit from the crude start
+/// keeps most of such a stretch, bent into a compromise, and was refused
+/// as a systematic misfit in 16-34 % of the runs and silently wrong in
+/// 0.4-3.9 %; the window starts ([`mag_cal_core::DOUBT_LACK_OF_FIT`]) find
+/// the fit without it.
+#[test]
+fn a_fifth_of_the_rows_displaced_as_one_stretch_is_left_out() {
+    let grid = Grid {
+        kinds: vec![Kind::Patch, Kind::Moving],
+        fractions: vec![0.2],
+        degenerate: vec![],
+        ..Grid::full(64)
+    };
+    for method in [Method::Adc2, Method::Adc2Iterated] {
+        for precision in Precision::ALL {
+            let config = Config {
+                method,
+                ..Config::default()
+            };
+            let study = run_study(&config, precision, &grid);
+            for kind in [Kind::Patch, Kind::Moving] {
+                let cell = study.pooled(&Case::Contaminated(kind, 0.2));
+                let what = format!("{method:?} {} {} 0.2", precision.name(), kind.name());
+                assert_cell(&what, &cell, 0.97, 0.01, (f64::INFINITY, f64::INFINITY));
+            }
+        }
+    }
+}
+
+/// The report names the window the robust LS started without, when the
+/// fit from the rows outside it scored best, and that window holds most of
+/// the displaced stretch. (Where the fit from the crude start left the
+/// stretch out itself, or the window starts did no better, it names none.)
+#[test]
+fn the_report_names_the_window_the_fit_started_without() {
+    let mut named = 0;
+    for seed in 0..16u64 {
+        let setting = Setting {
+            units: Units::MicroTesla,
+            coverage: Coverage::Sphere,
+            n: 1000,
+        };
+        let run = CleanRun::generate(setting, &mut Rng(300 + seed));
+        let c = contaminate(&run, Kind::Patch, 0.2, &mut Rng(11 + seed));
+        let fit = calibrate::<f64, _>(&c.rows.samples, &Config::default()).expect("calibrates");
+        let e = fit_errors(
+            &fit.calibration.hard_iron_vector(),
+            &fit.calibration.soft_iron_matrix(),
+            &run.truth,
+        );
+        assert!(!e.wrong(), "seed {seed}: e_M {} e_b {}", e.e_m, e.e_b);
+        let window = fit.report.start_window;
+        println!("seed {seed}: start window {:?}", window.spans());
+        if window.is_empty() {
+            continue;
+        }
+        named += 1;
+        // Half the rows, in one span or two when it wraps at the end.
+        let rows: usize = window.spans().iter().map(|&(s, e)| e - s).sum();
+        assert_eq!(rows, 500, "seed {seed}: {:?}", window.spans());
+        let displaced = c.marked.iter().filter(|&&m| m).count();
+        let inside = (0..c.marked.len())
+            .filter(|&i| c.marked[i] && window.contains(i))
+            .count();
+        assert!(
+            2 * inside > displaced,
+            "seed {seed}: {inside} of {displaced} displaced rows in {:?}",
+            window.spans()
+        );
+    }
+    // Measured: 9 of 16.
+    assert!(named >= 5, "{named} of 16 runs named a window");
+}

@@ -56,6 +56,11 @@ pub struct Outcome {
     /// Passes of the outlier handling over the samples: screening and
     /// robust LS refits (0 when the plain fit was clean, and with `--plain`).
     pub robust_passes: u32,
+    /// The rows the robust LS started without, `[[start, end], ...]`: a
+    /// window of half the rows, when the first fit was in doubt and the
+    /// fit from the rows outside it scored best (empty otherwise).
+    #[serde(serialize_with = "crate::selection::spans")]
+    pub start_window: mag_cal_core::Runs,
     /// Wall time of the `calibrate` call alone, microseconds.
     pub timing_us: f64,
     /// How well the calibration fits the samples.
@@ -247,6 +252,7 @@ fn fit_in<T: Real>(
         iterations: report.iterations,
         passes: report.passes,
         robust_passes: report.robust_passes,
+        start_window: report.start_window,
         timing_us: elapsed_us,
         quality: Quality {
             radial_rms: report.radial_rms.to_f64(),

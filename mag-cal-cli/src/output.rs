@@ -111,7 +111,22 @@ fn outlier_handling(o: &Outcome) -> String {
         (false, _) => "off (--plain: every finite row trusted)".to_owned(),
         (true, 0) => "on; the plain fit was clean (0 robust passes)".to_owned(),
         (true, 1) => "on, 1 robust pass (screening, robust LS refits)".to_owned(),
-        (true, n) => format!("on, {n} robust passes (screening, robust LS refits)"),
+        (true, n) if o.start_window.is_empty() => {
+            format!("on, {n} robust passes (screening, robust LS refits)")
+        }
+        (true, n) => {
+            let rows: Vec<String> = o
+                .start_window
+                .spans()
+                .iter()
+                .map(|&(start, end)| format!("{start}-{}", end - 1))
+                .collect();
+            format!(
+                "on, {n} robust passes (screening, robust LS refits; the first fit was in doubt, \
+                 and the fit that started without rows {} scored best)",
+                rows.join(", ")
+            )
+        }
     }
 }
 
@@ -268,6 +283,7 @@ mod tests {
             iterations: 5,
             passes: 1,
             robust_passes: 2,
+            start_window: mag_cal_core::Runs::NONE,
             timing_us: 12.5,
             quality: Quality {
                 radial_rms: 0.0123,

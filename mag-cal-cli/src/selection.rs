@@ -74,7 +74,7 @@ pub struct SelectionJson {
 }
 
 /// The spans of `runs` as `[[start, end], ...]`.
-fn spans<S: Serializer>(runs: &Runs, serializer: S) -> Result<S::Ok, S::Error> {
+pub(crate) fn spans<S: Serializer>(runs: &Runs, serializer: S) -> Result<S::Ok, S::Error> {
     serializer.collect_seq(runs.spans().iter().map(|&(s, e)| [s, e]))
 }
 

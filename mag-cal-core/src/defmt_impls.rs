@@ -68,7 +68,7 @@ macro_rules! formats {
             fn format(&self, f: Formatter<'_>) {
                 write!(
                     f,
-                    "Report {{ method: {}, ls: {}, iterations: {}, passes: {}, robust_passes: {}, samples_used: {}, samples_dropped: {}, drops: {}, screened: {}, rejected: {}, radial_rms: {}, quality: {}, warnings: {}, selection: {} }}",
+                    "Report {{ method: {}, ls: {}, iterations: {}, passes: {}, robust_passes: {}, samples_used: {}, samples_dropped: {}, drops: {}, screened: {}, rejected: {}, beside_runs: {}, radial_rms: {}, quality: {}, warnings: {}, selection: {}, start_window: {} }}",
                     self.method,
                     self.ls,
                     self.iterations,
@@ -79,10 +79,12 @@ macro_rules! formats {
                     self.drops,
                     self.screened,
                     self.rejected,
+                    self.beside_runs,
                     self.radial_rms,
                     self.quality,
                     self.warnings,
-                    self.selection
+                    self.selection,
+                    self.start_window
                 );
             }
         }
