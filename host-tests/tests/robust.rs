@@ -486,7 +486,7 @@ fn the_report_names_the_window_the_fit_started_without() {
             &run.truth,
         );
         assert!(!e.wrong(), "seed {seed}: e_M {} e_b {}", e.e_m, e.e_b);
-        let window = fit.report.start_window;
+        let window = fit.report.start_window();
         println!("seed {seed}: start window {:?}", window.spans());
         if window.is_empty() {
             continue;

@@ -252,7 +252,7 @@ fn fit_in<T: Real>(
         iterations: report.iterations,
         passes: report.passes,
         robust_passes: report.robust_passes,
-        start_window: report.start_window,
+        start_window: report.start_window(),
         timing_us: elapsed_us,
         quality: Quality {
             radial_rms: report.radial_rms.to_f64(),

@@ -68,7 +68,7 @@ macro_rules! formats {
             fn format(&self, f: Formatter<'_>) {
                 write!(
                     f,
-                    "Report {{ method: {}, ls: {}, iterations: {}, passes: {}, robust_passes: {}, samples_used: {}, samples_dropped: {}, drops: {}, screened: {}, rejected: {}, beside_runs: {}, radial_rms: {}, quality: {}, warnings: {}, selection: {}, start_window: {} }}",
+                    "Report {{ method: {}, ls: {}, iterations: {}, passes: {}, robust_passes: {}, samples_used: {}, samples_dropped: {}, drops: {}, screened: {}, rejected: {}, beside_runs: {}, radial_rms: {}, quality: {}, warnings: {}, selection: {}, start: {} }}",
                     self.method,
                     self.ls,
                     self.iterations,
@@ -84,7 +84,7 @@ macro_rules! formats {
                     self.quality,
                     self.warnings,
                     self.selection,
-                    self.start_window
+                    self.start
                 );
             }
         }

@@ -143,7 +143,7 @@
 //!    fit into a compromise that keeps it, and one window holds most of it.
 //!
 //! The report says what happened ([`Report::drops`], [`Report::screened`],
-//! [`Report::rejected`], [`Report::start_window`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
+//! [`Report::rejected`], [`Report::start`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
 //! and [`Selection::classify`] tells, row by row, which rows the fit used.
 //!
 //! # Around the fit
@@ -381,12 +381,41 @@ pub struct Report<T: Real> {
     /// Which rows the fit used: classifies any row afterwards
     /// ([`Selection::classify`]).
     pub selection: Selection<T>,
-    /// The rows the robust LS's start left out: a window of half the
-    /// recording, when the first result was in doubt (its lack of fit
-    /// beyond [`DOUBT_LACK_OF_FIT`]) and the fit from the rows outside that
-    /// window scored best (the smallest median residual over every row).
-    /// Empty when the fit started from every row.
-    pub start_window: Runs,
+    /// The robust LS's start: 0 for the crude start on every row, `k` in
+    /// `1..=4` for the rows outside window `k` ([`Report::start_window`]),
+    /// when the first result was in doubt (its lack of fit beyond
+    /// [`DOUBT_LACK_OF_FIT`]) and the fit from those rows scored best (the
+    /// smallest median residual over every row).
+    pub start: u8,
+}
+
+impl<T: Real> Report<T> {
+    /// The rows the robust LS's start left out ([`Report::start`]): half
+    /// of the rows, from `(k - 1) n / 4` on, wrapping at the end (`n` the
+    /// rows calibrated from); none for the crude start.
+    ///
+    /// ```
+    /// # use mag_cal_core::{calibrate, Config};
+    /// # let samples: Vec<[f32; 3]> = (0..400)
+    /// #     .map(|i| {
+    /// #         let (t, p) = (i as f32 * 2.4, (i as f32 / 400.0 * 2.0 - 1.0).acos());
+    /// #         [300.0 * p.sin() * t.cos(), 300.0 * p.sin() * t.sin(), 300.0 * p.cos()]
+    /// #     })
+    /// #     .collect();
+    /// let fit = calibrate::<f32, _>(&samples, &Config::default())?;
+    /// // Clean samples: the plain fit, no robust start at all.
+    /// assert_eq!(fit.report.start, 0);
+    /// assert!(fit.report.start_window().is_empty());
+    /// # Ok::<(), mag_cal_core::Error>(())
+    /// ```
+    pub fn start_window(&self) -> Runs {
+        let rows = self
+            .samples_used
+            .saturating_add(self.samples_dropped)
+            .saturating_add(self.screened)
+            .saturating_add(self.rejected);
+        robust::window(usize::from(self.start), rows)
+    }
 }
 
 /// A calibration and its report.
@@ -492,8 +521,8 @@ fn pipeline<T: Real, S: Sample>(
 
 /// What the steps before the method leave for it and for the judging.
 struct Start<'r, T: Real> {
-    /// The rows the robust LS's start left out ([`robust::window`]).
-    window: &'r runs::Runs,
+    /// The robust LS's start ([`Report::start`]).
+    start: u8,
     norm: normalize::Normalization<T>,
     ls: ellipsoid::Ellipsoid<T>,
     weights: methods::Weights<'r, T>,
@@ -567,7 +596,7 @@ fn plain_start<T: Real, S: Sample>(
     };
     figures.quadric_gap = gap;
     let start = Start {
-        window: &runs::Runs::NONE,
+        start: 0,
         norm,
         ls,
         weights: methods::Weights {
@@ -588,7 +617,7 @@ fn plain_start<T: Real, S: Sample>(
 /// [`quality::REFUSE_LACK_OF_FIT`]), or when it is refused for too many
 /// outliers or as a systematic misfit: the robust LS may have settled on a
 /// compromise that a long disturbance bent. The path then tries the window
-/// starts ([`Report::start_window`]). Measured on the contamination study
+/// starts ([`Report::start`]). Measured on the contamination study
 /// (f32, 256 runs a cell): 0.003 and 0.004 left 22 of 18 688 runs silently
 /// wrong, 0.005 24 (53 without the window starts); of the accepted fits
 /// with a tenth of the rows displaced as a patch or by a moving
@@ -682,17 +711,8 @@ fn robust_attempt<T: Real, S: Sample>(
     let mut figures = Figures::new(scan, config, true);
     // The spans beside runs of rejected rows, which the weights refer to.
     let mut runs = runs::Runs::NONE;
-    let window = robust::window(k, samples.len());
     *outcome = Attempt::default();
-    let mut start = robust_start(
-        samples,
-        config,
-        scan,
-        ls_solve,
-        &mut figures,
-        &mut runs,
-        &window,
-    )?;
+    let mut start = robust_start(samples, config, scan, ls_solve, &mut figures, &mut runs, k)?;
     start.robust_passes = start.robust_passes.saturating_add(before);
     outcome.passes = start.robust_passes;
     let fit = robust_rest(samples, config, &start, step, &mut figures);
@@ -719,16 +739,8 @@ fn robust_score<T: Real, S: Sample>(
 ) -> (Option<T>, u32) {
     let mut figures = Figures::new(scan, config, true);
     let mut runs = runs::Runs::NONE;
-    let window = robust::window(k, samples.len());
-    let Ok(start) = robust_start(
-        samples,
-        config,
-        scan,
-        ls_solve,
-        &mut figures,
-        &mut runs,
-        &window,
-    ) else {
+    let Ok(start) = robust_start(samples, config, scan, ls_solve, &mut figures, &mut runs, k)
+    else {
         return (None, 0);
     };
     let every = screen::stride(figures.valid);
@@ -778,8 +790,9 @@ fn robust_start<'r, T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
     runs: &'r mut runs::Runs,
-    window: &'r runs::Runs,
+    k: usize,
 ) -> Result<Start<'r, T>, Error> {
+    let window = &robust::window(k, samples.len());
     let screening = screen::screen(samples, scan)?;
     figures.drops = screening.drops;
     figures.valid = screening.valid;
@@ -802,7 +815,7 @@ fn robust_start<'r, T: Real, S: Sample>(
     figures.flatness = Some(quality::flatness(&fitted.moments, kept)?);
     figures.quadric_gap = quality::moments_gap(&fitted.moments);
     let start = Start {
-        window,
+        start: u8::try_from(k).unwrap_or(u8::MAX),
         norm: screening.norm,
         ls: fitted.ls,
         weights: methods::Weights {
@@ -952,7 +965,7 @@ fn finish<T: Real, S: Sample>(
             residual_limit: limit,
             runs: *runs,
         },
-        start_window: *start.window,
+        start: start.start,
     };
     Ok(Finished {
         fit: Fit {

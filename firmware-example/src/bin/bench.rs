@@ -391,6 +391,31 @@ fn calibration_with(timer: &Timer, name: &str, samples: &[[i16; 3]], cfg: &Confi
     }
 }
 
+/// Like [`calibration_with`] for samples the calibration must refuse:
+/// reports the instructions of the refusal and its reason; `false` when it
+/// was accepted.
+fn refusal_with(timer: &Timer, name: &str, samples: &[[i16; 3]], cfg: &Config) -> bool {
+    let cfg = *cfg;
+    let mut result = None;
+    let count = timer.instructions(1, || {
+        result = Some(calibrate::<f32, [i16; 3]>(
+            black_box(samples),
+            black_box(&cfg),
+        ));
+    });
+    match result {
+        Some(Err(e)) => {
+            report(name, samples.len(), count);
+            println!("# {=str} n={=usize}: refused: {}", name, samples.len(), e);
+            true
+        }
+        _ => {
+            defmt::error!("{=str}: expected a refusal", name);
+            false
+        }
+    }
+}
+
 #[entry]
 fn main() -> ! {
     let mut cp = cortex_m::Peripherals::take().expect("taken once");
@@ -461,6 +486,12 @@ fn main() -> ! {
         let iterated = config(Method::Adc2Iterated);
         ok &= calibration_with(&timer, kind.bench_name_iterated(), dirty, &iterated).is_some();
     }
+    // 30 % of the rows as one patch: refused for too many outliers, which
+    // puts the first result in doubt, so the window starts are scored and
+    // the robust path runs again (the cost of such a refusal).
+    dirty.copy_from_slice(samples);
+    Kind::Patch.apply(dirty, 0.30, 7);
+    ok &= refusal_with(&timer, "robust-patch-0.3", dirty, &config(Method::Adc2));
 
     // Stages of LS9 + ADC2.
     let norm = normalization(samples);
