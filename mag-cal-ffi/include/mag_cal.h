@@ -264,6 +264,13 @@ typedef struct {
   double outlier_share;
   // Warnings, one bit each (the `MAGCAL_WARNING_*` values).
   uint32_t warnings;
+  // Of the rejected rows, those left out beside a run of rejected rows
+  // although their residual is within the cut (not outliers).
+  uint32_t beside_runs;
+  // The robust LS's start: 0 for every row, `k` in 1..=4 for the rows
+  // outside window `k` (half the rows from `(k - 1) n / 4` on, wrapping),
+  // when the first result was in doubt and that start scored best.
+  uint32_t start;
 } MagcalResult;
 
 // A circular moving average of headings: caller-owned storage (declare

@@ -445,6 +445,13 @@ pub struct MagcalResult {
     pub outlier_share: f64,
     /// Warnings, one bit each (the `MAGCAL_WARNING_*` values).
     pub warnings: u32,
+    /// Of the rejected rows, those left out beside a run of rejected rows
+    /// although their residual is within the cut (not outliers).
+    pub beside_runs: u32,
+    /// The robust LS's start: 0 for every row, `k` in 1..=4 for the rows
+    /// outside window `k` (half the rows from `(k - 1) n / 4` on, wrapping),
+    /// when the first result was in doubt and that start scored best.
+    pub start: u32,
 }
 
 /// Warning bits of `MagcalResult::warnings`.
@@ -504,6 +511,8 @@ impl<T: Real> From<&Fit<T>> for MagcalResult {
             lack_of_fit: q.lack_of_fit.to_f64(),
             outlier_share: q.outlier_share.to_f64(),
             warnings: bits,
+            beside_runs: to_u32(r.beside_runs),
+            start: u32::from(r.start),
         }
     }
 }
