@@ -47,6 +47,16 @@ fn configs() -> Vec<(&'static str, Config)> {
                 ..Config::default()
             },
         ),
+        // LS alone is not judged by its lack of fit (its algebraic residual
+        // is biased by region), so its plain fit passes for clean with a
+        // displaced patch: shown here, not yet fixed.
+        (
+            "robust LS9 alone (`Method::Ls`)",
+            Config {
+                method: Method::Ls,
+                ..Config::default()
+            },
+        ),
         ("plain ADC2 (`robust: false`)", plain),
         (
             "plain iterated ADC2 (`robust: false`)",
