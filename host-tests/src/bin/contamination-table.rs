@@ -48,8 +48,9 @@ fn configs() -> Vec<(&'static str, Config)> {
             },
         ),
         // LS alone is not judged by its lack of fit (its algebraic residual
-        // is biased by region), so its plain fit passes for clean with a
-        // displaced patch: shown here, not yet fixed.
+        // is biased by region): its plain attempt is judged clean by the
+        // tails of an artificial-data pass and by its lack of shape
+        // (`CLEAN_SHAPE`), its fit error about the rows' mean radius.
         (
             "robust LS9 alone (`Method::Ls`)",
             Config {
