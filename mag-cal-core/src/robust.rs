@@ -211,10 +211,20 @@ pub(crate) fn window(k: usize, rows: usize) -> Runs {
     spans.unwrap_or(Runs::NONE)
 }
 
+/// How well a start's robust fit explains the rows ([`score`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Score<T: Real> {
+    /// The median algebraic residual `|e|`: lower is better.
+    pub median: T,
+    /// The share of the rows scored whose `|e|` exceeds
+    /// [`OUTLIER_CUT`] robust sigmas (`1.4826` medians): the rows the fit
+    /// leaves out.
+    pub beyond: T,
+}
+
 /// The score of a robust fit `ls` (in the normalised coordinates of
-/// `norm`): the median algebraic residual `|e|` over every `every`-th row
-/// that `gate` passes, none skipped (one pass, which sums no moments).
-/// Out of line, as [`weighted_moments`].
+/// `norm`) over every `every`-th row that `gate` passes, none skipped (one
+/// pass, which sums no moments). Out of line, as [`weighted_moments`].
 #[inline(never)]
 pub(crate) fn score<T: Real, S: Sample>(
     samples: &[S],
@@ -222,7 +232,7 @@ pub(crate) fn score<T: Real, S: Sample>(
     gate: &Gate<T>,
     ls: &Ellipsoid<T>,
     every: usize,
-) -> Option<T> {
+) -> Option<Score<T>> {
     let mut hist = LogHistogram::new();
     // A limit of zero keeps no row: the pass only counts the residuals.
     let cut = Cut {
@@ -239,7 +249,12 @@ pub(crate) fn score<T: Real, S: Sample>(
         every,
         None,
     );
-    hist.quantile(T::lit(0.5))
+    let median = hist.quantile(T::lit(0.5))?;
+    let cut = robust_sigma::<T>(&hist)? * T::lit(OUTLIER_CUT);
+    let total = hist.total();
+    let within = hist.count_below(cut).min(total);
+    let beyond = T::from_count((total - within) as usize) / T::from_count(total as usize);
+    Some(Score { median, beyond })
 }
 
 /// The band around the crude sphere as a cut on the algebraic residual
