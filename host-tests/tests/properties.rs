@@ -172,7 +172,17 @@ proptest! {
         }
     }
 
-    /// Permuting the samples changes nothing (beyond summation rounding).
+    /// Permuting the samples changes nothing (beyond summation rounding),
+    /// but where the robust path started from a window of the recording
+    /// (`Report::start`, a result in doubt): the windows are stretches of
+    /// the samples' order by design (a disturbance lasts a stretch of the
+    /// recording), so another order may score another window best. Seen:
+    /// LS alone on 300 rows of a 4:1 ellipsoid at 3 % noise, in doubt in
+    /// both orders (lack of fit 0.0045 and 0.0041), one of which took a
+    /// window that scored 5 % better than the crude start: 1.7e-2 in M.
+    /// (Requiring a window to score 5 % better than the crude start left
+    /// 13 of 18 688 runs of the contamination study silently wrong
+    /// against 12.)
     #[test]
     fn permutation_invariance(t in distortion(), seed in any::<u64>(), shift in 0usize..1000) {
         let mut rng = Rng(seed);
@@ -183,7 +193,12 @@ proptest! {
         for ((method, ls), (robust, tol)) in ALL.into_iter().flat_map(|m| MODES.map(|r| (m, r))) {
             let label = format!("{method:?} {ls:?} robust {robust}");
             let cfg = Config { robust, ..config(method, ls) };
-            let Some((a, c)) = pair(&label, &t, calibrate(&y, &cfg), calibrate(&p, &cfg))? else { continue };
+            let (fy, fp) = (calibrate(&y, &cfg), calibrate(&p, &cfg));
+            let window = |f: &Result<Fit<f64>, Error>| f.as_ref().is_ok_and(|f| f.report.start != 0);
+            if window(&fy) || window(&fp) {
+                continue;
+            }
+            let Some((a, c)) = pair(&label, &t, fy, fp)? else { continue };
             let dm = (a.shape_matrix() - c.shape_matrix()).amax() / a.shape_matrix().amax();
             prop_assert!(dm < tol, "{label}: {dm:e}");
             prop_assert!((a.hard_iron_vector() - c.hard_iron_vector()).norm() < tol * a.field_strength());

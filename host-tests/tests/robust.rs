@@ -124,16 +124,16 @@ fn contamination_up_to_ten_percent() {
                 for &f in &grid.fractions {
                     let cell = study.pooled(&Case::Contaminated(kind, f));
                     let what = format!("{label} {} {}", kind.name(), f);
-                    // A clipped range is dropped by the clip rule: the cap
-                    // of directions beyond it is then unobserved, and the
-                    // fit of the rest is as good as that coverage allows
-                    // (the clean fit saw the cap).
+                    // Every kind to the ratio of the target, a clipped
+                    // range too: its rows share the axis's extreme, which
+                    // sends the data past the plain fit to the screening's
+                    // clip rule (`screen::CLIP_HINT_ROWS`; at 2 % the
+                    // plain fit passed as clean, with ratios 1.35 / 1.52).
                     let (needed, ratio) = match kind {
                         // 64 runs a cell here, where one run is 1.6 %: the
                         // 97 % of the target is asserted on 256 runs a cell
                         // by `a_displaced_patch_of_the_trajectory_is_left_out`.
                         Kind::Patch if f > 0.05 => (0.95, 1.3),
-                        Kind::RangeClip => (0.97, 2.0),
                         _ => (0.97, 1.3),
                     };
                     assert!(

@@ -123,6 +123,9 @@
 //!    attempt whose LS residuals already show heavy tails
 //!    ([`CLEAN_KURTOSIS`]), rows pulled inwards ([`CLEAN_SKEWNESS`]) or a
 //!    residual beyond the limit stops before its solve or its final pass;
+//!    and none is made when an axis's extreme is shared by
+//!    [`CLIP_HINT_ROWS`] rows of a subsample (a clip level, which
+//!    bends the plain fit without standing out of its residuals);
 //! 3. otherwise screens the rows farther than [`SCREEN_RADIUS`] median
 //!    distances from a coordinate-wise median centre (or, when samples
 //!    crowded on one side of the sphere put that centre near the crowded
@@ -265,7 +268,7 @@ pub use real::Real;
 pub use rules::{Drops, Rule, SampleClass, Selection};
 pub use runs::Runs;
 pub use sample::{Sample, SampleStore};
-pub use screen::{SCREEN_RADIUS, SUBSAMPLE_ROWS};
+pub use screen::{CLIP_HINT_ROWS, SCREEN_RADIUS, SUBSAMPLE_ROWS};
 
 /// Pieces of the pipeline for this repository's benchmarks and tests.
 /// Not part of the API: anything here may change or go in any release.
@@ -531,6 +534,14 @@ fn pipeline<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples, config.robust)?;
+    let gate = rules::Gate {
+        rules: scan.rules,
+        screen: None,
+    };
+    if config.robust && screen::clip_hint(samples, &gate, scan.used) {
+        // A clip level may bend the plain fit unseen: screening finds it.
+        return robust_path(samples, config, &scan, ls_solve, step);
+    }
     // The plain result is returned as it is, or not at all: this frame
     // then holds no second fit under the robust path (224 bytes of stack).
     let mut clean = false;
