@@ -521,6 +521,7 @@ fn thresholds(rng: &mut Rng) -> Thresholds {
         warn_fit_error: any(d.warn_fit_error),
         refuse_outlier_share: any(d.refuse_outlier_share),
         refuse_lack_of_fit: any(d.refuse_lack_of_fit),
+        refuse_skewness: any(d.refuse_skewness),
     }
 }
 

@@ -105,6 +105,10 @@ pub struct Quality {
     /// Share of the rows kept by the rules that the fit did not use
     /// (screened or rejected; refused above 0.25).
     pub outlier_share: f64,
+    /// Skewness of the radial residuals of the rows used, with outlier
+    /// handling (0 when the plain fit was clean): a filled cloud is skewed
+    /// inwards (refused below -0.6 with a fit error above 0.05).
+    pub skewness: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
 }
@@ -266,6 +270,7 @@ fn fit_in<T: Real>(
             fit_error: report.quality.fit_error.to_f64(),
             lack_of_fit: report.quality.lack_of_fit.to_f64(),
             outlier_share: report.quality.outlier_share.to_f64(),
+            skewness: report.quality.skewness.to_f64(),
             warnings: report.warnings.iter().map(|w| w.name()).collect(),
         },
         selection: SelectionJson::from_core(&report.selection),

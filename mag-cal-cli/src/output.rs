@@ -69,10 +69,11 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
     );
     let _ = writeln!(
         s,
-        "  fit error     {} of the field, lack of fit {}, outlier share {} %",
+        "  fit error     {} of the field, lack of fit {}, outlier share {} %, skewness {}",
         sig(o.quality.fit_error, 3),
         sig(o.quality.lack_of_fit, 2),
-        sig(100.0 * o.quality.outlier_share, 2)
+        sig(100.0 * o.quality.outlier_share, 2),
+        sig(o.quality.skewness, 2)
     );
     // One line a warning: its name and the core's sentence for people.
     let warnings = if o.quality.warnings.is_empty() {
@@ -296,6 +297,7 @@ mod tests {
                 fit_error: 0.023_78,
                 lack_of_fit: 0.003_04,
                 outlier_share: 0.01,
+                skewness: -0.12,
                 warnings: vec!["pass_cap"],
             },
             selection: SelectionJson {
@@ -385,7 +387,8 @@ mod tests {
         );
         assert!(
             t.contains(
-                "  fit error     0.0238 of the field, lack of fit 0.0030, outlier share 1.0 %\n"
+                "  fit error     0.0238 of the field, lack of fit 0.0030, outlier share 1.0 %, \
+                 skewness -0.12\n"
             ),
             "{t}"
         );

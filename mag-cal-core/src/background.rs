@@ -1135,6 +1135,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                 fit_error: last.fit_error,
                 lack_of_fit: last.lack_of_fit,
                 outlier_share: figures.outlier_share().unwrap_or(T::zero()),
+                // Its passes take every row the store holds (no gate).
+                skewness: T::zero(),
             },
             warnings,
             fit_error: last.fit_error,

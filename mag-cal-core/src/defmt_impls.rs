@@ -37,7 +37,7 @@ macro_rules! formats {
             fn format(&self, f: Formatter<'_>) {
                 write!(
                     f,
-                    "Quality {{ flatness: {}, quadric_gap: {}, distortion: {}, coverage: {}, gram_condition: {}, fit_error: {}, lack_of_fit: {}, outlier_share: {} }}",
+                    "Quality {{ flatness: {}, quadric_gap: {}, distortion: {}, coverage: {}, gram_condition: {}, fit_error: {}, lack_of_fit: {}, outlier_share: {}, skewness: {} }}",
                     self.flatness,
                     self.quadric_gap,
                     self.distortion,
@@ -45,7 +45,8 @@ macro_rules! formats {
                     self.gram_condition,
                     self.fit_error,
                     self.lack_of_fit,
-                    self.outlier_share
+                    self.outlier_share,
+                    self.skewness
                 );
             }
         }

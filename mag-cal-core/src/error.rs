@@ -70,6 +70,16 @@ pub enum Error {
         /// The limit it exceeds.
         limit: Figure,
     },
+    /// The samples fill a volume instead of lying on a shell: the radial
+    /// residuals of the rows used are skewed inwards, with a fit error
+    /// beyond the warning (a filled cloud, which an ellipsoid fit of its
+    /// outer rows can pass under the fit-error limit).
+    FilledCloud {
+        /// Skewness of `|u| - 1` over the rows used.
+        skewness: Figure,
+        /// The limit it is below.
+        limit: Figure,
+    },
     /// Too many rows are outliers to trust the rest: more than the limit's
     /// share of the rows kept by the rules were screened out or rejected
     /// by their residual.
@@ -182,6 +192,11 @@ impl fmt::Display for Error {
                 f,
                 "the samples do not lie on a sphere (fit error {fit_error:.3} of the field, limit {limit:.2}): \
                  the device was not rotated, or these are not one magnetometer's readings"
+            ),
+            Error::FilledCloud { skewness, limit } => write!(
+                f,
+                "the samples fill a volume instead of lying on a sphere (radial residuals skewed inwards: \
+                 skewness {skewness:.2}, limit {limit:.2}): these are not one magnetometer's readings of a turning device"
             ),
             Error::TooManyOutliers {
                 rejected,

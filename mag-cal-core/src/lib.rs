@@ -100,6 +100,7 @@
 //! | `fit_error` | robust sigma `1.4826 median||u| - 1|` of the radial residuals, in units of the field (for the LS fit alone with outlier handling, of the rows' mean radius: LS's radius shrinks under noise) | above 0.2: [`Error::NoSphere`] (a device lying still, a filled cloud) | above 0.05 |
 //! | `outlier_share` | share of the valid rows the fit left out as outliers (screened, or beyond the cut) | above 0.25: [`Error::TooManyOutliers`] | |
 //! | `lack_of_fit` | systematic radial misfit over 24 direction cells | above 0.01 and significant: [`Error::SystematicMisfit`] | |
+//! | `skewness` | skewness of the radial residuals of the rows used (outlier handling): about 0 on a noisy shell, -0.7 to -0.9 on a filled ball | below -0.6 with a fit error above 0.05: [`Error::FilledCloud`] | |
 //!
 //! With [`Config::expected_field_strength`] a field strength more than
 //! 25 % off is refused ([`Error::FieldStrengthMismatch`]); fewer than 50
@@ -992,6 +993,10 @@ fn finish<T: Real, S: Sample>(
     figures.fit_error = Some(fit_error);
     figures.lack_of_fit = Some(last.lack_of_fit);
     figures.misfit_significant = last.misfit_significant;
+    // Only the robust path's pass sums the cubes.
+    if figures.robust {
+        figures.skewness = last.skewness;
+    }
     figures.field_deviation = config
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
@@ -1006,6 +1011,7 @@ fn finish<T: Real, S: Sample>(
         fit_error,
         lack_of_fit: last.lack_of_fit,
         outlier_share: figures.outlier_share().unwrap_or(T::zero()),
+        skewness: figures.skewness,
     };
     let report = Report {
         method: config.method,

@@ -303,6 +303,11 @@ impl<T: Real> Gate<T> {
 /// (no rule, no screening, no row before to track: 20-40 instructions a
 /// sample less on a Cortex-M4F in each pass).
 pub(crate) trait Filter<T: Real> {
+    /// The robust path's gate: the final pass also sums the cubes of the
+    /// residuals ([`crate::quality::Quality::skewness`]), which the plain
+    /// loop does not pay for.
+    const ROBUST: bool = false;
+
     /// The rows of `block` the filter passes; `prev` is the row before the
     /// block in the whole slice.
     fn rows<'a, S: Sample>(
@@ -330,6 +335,8 @@ impl<T: Real> Filter<T> for Finite {
 }
 
 impl<T: Real> Filter<T> for Gate<T> {
+    const ROBUST: bool = true;
+
     #[inline(always)]
     fn rows<'a, S: Sample>(
         &'a self,

@@ -190,6 +190,9 @@ typedef struct {
   float refuse_outlier_share;
   // Lack of fit above this (and significant): refused (0.01).
   float refuse_lack_of_fit;
+  // Skewness of the radial residuals below this, with a fit error above
+  // `warn_fit_error`: refused as no sphere, a filled cloud (-0.6).
+  float refuse_skewness;
 } MagcalThresholds;
 
 // What to run. Fill with `magcal_config_default`, then change fields.

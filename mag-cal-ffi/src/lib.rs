@@ -138,7 +138,7 @@ impl From<Error> for MagcalStatus {
             Error::ExtremeDistortion => Self::ExtremeDistortion,
             Error::PoorCoverage => Self::PoorCoverage,
             Error::FieldStrengthMismatch => Self::FieldStrengthMismatch,
-            Error::NoSphere { .. } => Self::NoSphere,
+            Error::NoSphere { .. } | Error::FilledCloud { .. } => Self::NoSphere,
             Error::TooManyOutliers { .. } => Self::TooManyOutliers,
             Error::SystematicMisfit { .. } => Self::SystematicMisfit,
             Error::Truncated => Self::Truncated,
@@ -244,6 +244,9 @@ pub struct MagcalThresholds {
     pub refuse_outlier_share: f32,
     /// Lack of fit above this (and significant): refused (0.01).
     pub refuse_lack_of_fit: f32,
+    /// Skewness of the radial residuals below this, with a fit error above
+    /// `warn_fit_error`: refused as no sphere, a filled cloud (-0.6).
+    pub refuse_skewness: f32,
 }
 
 impl From<Thresholds> for MagcalThresholds {
@@ -264,6 +267,7 @@ impl From<Thresholds> for MagcalThresholds {
             warn_fit_error: t.warn_fit_error,
             refuse_outlier_share: t.refuse_outlier_share,
             refuse_lack_of_fit: t.refuse_lack_of_fit,
+            refuse_skewness: t.refuse_skewness,
         }
     }
 }
@@ -286,6 +290,7 @@ impl MagcalThresholds {
             warn_fit_error: self.warn_fit_error,
             refuse_outlier_share: self.refuse_outlier_share,
             refuse_lack_of_fit: self.refuse_lack_of_fit,
+            refuse_skewness: self.refuse_skewness,
         }
     }
 }

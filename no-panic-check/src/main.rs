@@ -480,6 +480,7 @@ fn ffi() {
             warn_fit_error: 0.05,
             refuse_outlier_share: 0.25,
             refuse_lack_of_fit: 0.01,
+            refuse_skewness: -0.6,
         },
     };
     static mut RESULT: MaybeResult = MaybeResult([0; 64]);
