@@ -303,9 +303,10 @@ impl<T: Real> Gate<T> {
 /// (no rule, no screening, no row before to track: 20-40 instructions a
 /// sample less on a Cortex-M4F in each pass).
 pub(crate) trait Filter<T: Real> {
-    /// The robust path's gate: the final pass also sums the cubes of the
-    /// residuals ([`crate::quality::Quality::skewness`]), which the plain
-    /// loop does not pay for.
+    /// A gated pass (rules to apply, or the robust path's screening): the
+    /// final pass also sums the cubes of the residuals, which only the
+    /// robust path reports ([`crate::quality::Quality::skewness`]); the
+    /// loop over every finite row of clean data does not pay for them.
     const ROBUST: bool = false;
 
     /// The rows of `block` the filter passes; `prev` is the row before the
