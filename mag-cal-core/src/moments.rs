@@ -10,7 +10,7 @@ use nalgebra::SMatrix;
 use crate::histogram::LogHistogram;
 use crate::normalize::{Normalization, Projector};
 use crate::rules::{check, every, Gate, Rules};
-use crate::runs::{RunFinder, Runs, STRONG};
+use crate::runs::{RunFinder, Runs};
 use crate::sample::Sample;
 use crate::Real;
 
@@ -138,8 +138,8 @@ impl<T: Real> Moments<T> {
     }
 
     /// [`Moments::accumulate_every`] outside the spans of `skip` that, with
-    /// `runs`, also finds the runs of rows far beyond the cut and writes
-    /// them there ([`crate::runs`]).
+    /// `runs`, also finds the runs of rows whose residual is beyond the
+    /// threshold given with them and writes them there ([`crate::runs`]).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn accumulate_finding<S: Sample>(
         samples: &[S],
@@ -149,8 +149,12 @@ impl<T: Real> Moments<T> {
         cut: Option<&Cut<T>>,
         mut hist: Option<&mut LogHistogram>,
         stride: usize,
-        runs: Option<&mut Runs>,
+        runs: Option<(&mut Runs, T)>,
     ) -> Self {
+        let (runs, strong) = match runs {
+            Some((r, strong)) => (Some(r), strong),
+            None => (None, T::MAX),
+        };
         let mut finder = runs.map(RunFinder::new);
         let mut sums = [T::zero(); COUNT];
         let (low, high) = sums.split_at_mut(LOW);
@@ -164,7 +168,7 @@ impl<T: Real> Moments<T> {
                 hist.as_deref_mut(),
                 &mut mask,
                 stride,
-                finder.as_mut().map(|f| (start, f)),
+                finder.as_mut().map(|f| (start, strong, f)),
             );
             let mut a = sum_low(block, norm, &mask);
             a[0] = T::from_count(kept);
@@ -320,8 +324,8 @@ pub(crate) struct Cut<T: Real> {
 /// that the gate passes and the cut keeps, and returns their count;
 /// `hist`, when given, counts the cut's residual of every row the gate
 /// passes; `finder`, when given, gets the index of each row whose
-/// residual exceeds [`STRONG`] times the cut's limit (the block's first
-/// row is at the index given). A loop of its own: with the
+/// residual exceeds the threshold given with it (the block's first row is
+/// at the index given). A loop of its own: with the
 /// gate's and the cut's constants beside the 19 sums, one loop spilled
 /// (about 230 instructions a sample on a Cortex-M4F for this and
 /// [`sum_low`] together, against about 150 apart).
@@ -335,13 +339,12 @@ fn select<T: Real, S: Sample>(
     mut hist: Option<&mut LogHistogram>,
     mask: &mut [u32; MASK_WORDS],
     stride: usize,
-    mut finder: Option<(usize, &mut RunFinder<'_>)>,
+    mut finder: Option<(usize, T, &mut RunFinder<'_>)>,
 ) -> usize {
     let half = T::lit(0.5);
     // The cut by value: its constants then stay in registers rather than
     // being read again after each histogram write.
     let cut = cut.copied();
-    let strong = cut.map_or(T::MAX, |c| c.limit * T::lit(STRONG));
     let mut count = 0;
     for (i, s, last) in every(block, prev, stride) {
         let Some(y) = gate.pass(s, last) else {
@@ -355,7 +358,7 @@ fn select<T: Real, S: Sample>(
             }
             if !(e.abs() <= cut.limit) {
                 // Only rows well beyond the cut count towards a run.
-                if let Some((start, f)) = finder.as_mut().filter(|_| e.abs() > strong) {
+                if let Some((start, _, f)) = finder.as_mut().filter(|f| e.abs() > f.1) {
                     f.reject(start.saturating_add(i));
                 }
                 continue;

@@ -28,12 +28,25 @@
 //!
 //! The crude start and the refits run on a fixed subsample of about
 //! [`crate::screen::SUBSAMPLE_ROWS`] rows until its count of rows kept
-//! settles (changes by at most one), then two refits run on every row (one
-//! left a few more silently wrong fits at 20-30 % contamination);
-//! without a subsample (fewer than twice that many rows) up to [`REFITS`]
-//! refits run on every row until the count repeats. The first refit on
-//! every row after two refits also finds the runs of rows far beyond the
-//! cut ([`crate::runs`]); the passes after it skip the rows beside them.
+//! settles (changes by at most one). Then one pass on every row finds the
+//! runs of rows far beyond the cut ([`crate::runs`]) and measures the
+//! residuals' sigma there, and one refit on every row follows, which skips
+//! the rows beside the runs, as every later pass does. The finding pass
+//! sums no moments (a limit of zero keeps no row). When it refitted as
+//! well, it cost about 100 instructions a kept row more on a Cortex-M4F
+//! (LS9 + ADC2, n = 1000, a tenth of the rows displaced: 1.85 M against
+//! 1.75 M instructions) for little (the contamination study,
+//! `docs/results.md`: robust ADC2 silently wrong in 12 of 18 688 f32 runs
+//! then, 15 without it; every cell within its target); a single refit on
+//! every row with no finding pass before it left a disturbance moving
+//! past the sensor over a tenth of the rows at median error ratios of
+//! 1.27 / 1.39 (target 1.3). From a window start (below), whose subsample left out
+//! half the rows, the finding pass refits too: from the subsample's fit
+//! alone, a recording of level turns (the heading scenario of the paper
+//! tables) was refused as a systematic misfit. Without a subsample (fewer
+//! than twice [`crate::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`]
+//! passes run on every row until the count repeats, the third the finding
+//! pass.
 //!
 //! A disturbance of a fifth of the recording or more can bend the fit from
 //! the crude start into a compromise that keeps nearly every row. When the
@@ -127,10 +140,11 @@ struct Spread<T: Real> {
 }
 
 /// One weighted LS refit pass: the moments of the rows whose algebraic
-/// residual under `ls` is within `limit`, what the residuals under `ls`
-/// measure (for the next pass), and into `runs`, when given, the runs of
-/// rows far beyond the limit ([`crate::runs`]). Out of line: its histogram
-/// takes stack only during the pass.
+/// residual under `ls` is within `limit` (with `sums`; without, none),
+/// what the residuals under `ls` measure (for the next pass), and into
+/// `runs`, when given, the runs of rows beyond [`crate::runs::STRONG`]
+/// times the limit ([`crate::runs`]). Out of line: its histogram takes
+/// stack only during the pass.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn weighted_moments<T: Real, S: Sample>(
@@ -142,12 +156,15 @@ fn weighted_moments<T: Real, S: Sample>(
     limit: T,
     stride: usize,
     runs: Option<&mut Runs>,
+    sums: bool,
 ) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
+    let find = runs.map(|r| (r, limit * T::lit(crate::runs::STRONG)));
     let cut = Cut {
         map: Projector::new(norm, &ls.centre, &ls.w),
-        limit,
+        // A limit of zero keeps no row: no moments to sum.
+        limit: if sums { limit } else { T::zero() },
     };
     let m = Moments::accumulate_finding(
         samples,
@@ -157,7 +174,7 @@ fn weighted_moments<T: Real, S: Sample>(
         Some(&cut),
         Some(&mut hist),
         stride,
-        runs,
+        find,
     );
     let measured = robust_sigma(&hist)
         .zip(hist.quantile(T::lit(TRIM_SHARE)))
@@ -312,11 +329,14 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             let limit = trimmed.map_or(sigma * T::lit(OUTLIER_CUT), |t| {
                 smaller(sigma * T::lit(OUTLIER_CUT), t)
             });
-            // The first refit on every row after two refits finds the runs
+            // The first pass on every row after two refits finds the runs
             // of rejected rows; the passes after it skip the rows beside
-            // them.
+            // them. From the crude start it refits nothing (a limit of zero
+            // keeps no row, and its moments cost nothing): the refit after
+            // it starts from the subsample's fit. From a window start,
+            // whose subsample left out half the rows, it refits too.
             let find = rows == 1 && passes >= 3 && !found;
-            // The finding pass skips nothing and writes the runs in place.
+            let only_find = find && window.is_empty();
             let (skip, out) = if find {
                 (&Runs::NONE, Some(&mut *runs))
             } else if rows > 1 {
@@ -324,13 +344,19 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             } else {
                 (&*runs, None)
             };
-            let (m, measured) =
-                weighted_moments(samples, screening, gate, skip, &ls, limit, rows, out);
+            let (m, measured) = weighted_moments(
+                samples, screening, gate, skip, &ls, limit, rows, out, !only_find,
+            );
             passes += 1;
             found |= find;
             if let Some(r) = measured {
                 sigma = r.sigma;
                 trim = Some(r.trim);
+            }
+            if only_find {
+                // A count before rows were left out says nothing of the next.
+                last_kept = None;
+                continue;
             }
             let Ok(next) = fit_moments(&m, solve) else {
                 // The kept rows no longer determine an ellipsoid: keep the

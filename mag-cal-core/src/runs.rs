@@ -10,9 +10,10 @@
 //! (spans that touch merge). Rejected rows scattered in time (glitches,
 //! isolated displacements) leave their neighbours alone.
 //!
-//! The spans are found once, in the robust LS fit's first refit on every
-//! row after two refits; the later refits, the method's passes and the final
-//! pass skip them, and [`crate::Selection::classify`] reports their rows
+//! The spans are found once, in the robust LS fit's first pass on every
+//! row after two refits on fewer rows (from the crude start, a pass that
+//! refits nothing); the later refits, the method's passes
+//! and the final pass skip them, and [`crate::Selection::classify`] reports their rows
 //! as rejected. At most [`RUNS`] spans are kept: later runs are left to the
 //! residual cut, and their count is reported ([`Runs::missed`]).
 //!
