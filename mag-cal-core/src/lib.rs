@@ -136,11 +136,11 @@
 //!    weights on the residual (at [`OUTLIER_CUT`]` = 3.5` robust standard
 //!    deviations `1.4826 median|r|`, from fixed histograms: no sorting,
 //!    nothing stored per sample), then runs the method with the same
-//!    weights. The quantiles of the screening and the refits before the
-//!    last two use a fixed subsample of about [`SUBSAMPLE_ROWS`] rows
-//!    (every `k`-th row), so their cost hardly grows with `n`. Where
-//!    consecutive rows lie far beyond the cut (a disturbance passing), the
-//!    rows beside them, displaced less, are left out too ([`runs`]);
+//!    weights. The screening's histograms and the refits before the last
+//!    one use a fixed subsample of about [`SUBSAMPLE_ROWS`] rows (every
+//!    `k`-th row), so their cost hardly grows with `n`. Where consecutive
+//!    rows lie far beyond the cut (a disturbance passing), the rows beside
+//!    them, displaced less, are left out too ([`runs`]);
 //! 4. when that result is in doubt (lack of fit beyond
 //!    [`DOUBT_LACK_OF_FIT`], or refused for too many outliers or as a
 //!    misfit), scores the robust LS from four more starts, each on the rows
@@ -174,10 +174,10 @@
 //!
 //! LS9 + ADC2 on 1000 `[i16; 3]` samples in `f32` on a Cortex-M4F: about
 //! 400 000 instructions on clean samples (two passes over the samples for
-//! the fit, one for the scan and one for the figures); 0.7-1.8 M on samples
-//! with 10 % of the rows contaminated, and about 8.6 M when a result in
+//! the fit, one for the scan and one for the figures); 0.7-1.7 M on samples
+//! with 10 % of the rows contaminated, and about 8.5 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
-//! 44 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
+//! 46 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
 //! variant.
 //!
 //! # Features

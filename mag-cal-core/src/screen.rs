@@ -4,14 +4,15 @@
 //! Before any fit sees them, samples far from the cloud are screened out:
 //!
 //! 1. a coordinate-wise median centre `c`, from nested histograms per axis
-//!    (nested linear histograms): each pass narrows every axis's window to the
-//!    bins holding its middle half, until that half spans at least
-//!    [`RESOLVED_BINS`] bins (2 passes on data without wild values, 3-4
-//!    with values 100 times the field away). The first of these passes also finds the clip levels: an axis's
-//!    extreme value that many rows share, or a value inside its range
-//!    that many rows share exactly (an axis clipped on some reads only),
-//!    whose bin stands out of its neighbours ([`CLIP_SPIKE`]; two more
-//!    passes, only when one does);
+//!    (nested linear histograms) of a subsample ([`SUBSAMPLE_ROWS`]): each
+//!    pass narrows every axis's window to the bins holding its middle
+//!    half, until that half spans at least [`RESOLVED_BINS`] bins (1-2
+//!    passes on data without wild values, 3-4 with values 100 times the
+//!    field away). The first of these passes also finds the clip levels:
+//!    an axis's extreme value that many rows share, or a value inside its
+//!    range that many rows share exactly (an axis clipped on some reads
+//!    only), whose bin stands out of its neighbours ([`CLIP_SPIKE`]; two
+//!    more passes, only when one does);
 //! 2. the median distance `m = median |y - c|` (one pass, a logarithmic histogram);
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
@@ -88,14 +89,18 @@ pub const RECENTRE_GAIN: f64 = 0.5;
 /// centre stays (the coverage refusal then names the cause).
 pub const RECENTRE_MORE_ROWS: u32 = 16;
 
-/// The median distance, the shell band and the crude start, and the
-/// robust LS refits before the last two, run on a fixed
-/// subsample of about this many rows (every `k`-th row, `k` at least 1).
-/// A quantile or the set of outliers is settled as well on a few hundred
-/// rows as on all of them, at a fraction of the passes' cost. The bounds
-/// of the first median-centre window come from it too; the clip-level
-/// counts, the median centre's histograms and the last two refits see
-/// every row.
+/// The median centre's histograms (with the clip levels at the axes'
+/// extremes), the median distance, the shell band and the crude start,
+/// and the robust LS refits before the pass that finds the runs of
+/// rejected rows, run on a fixed subsample of about this many rows (every
+/// `k`-th row, `k` at least 1). A quantile or the set of outliers is
+/// settled as well on a few hundred rows as on all of them, at a fraction
+/// of the passes' cost. The bounds of the first median-centre window come
+/// from it too; the finding pass and the last refit see every row. The median centre's first histogram on every row
+/// instead cost about 125 instructions a row on a Cortex-M4F (LS9 + ADC2,
+/// n = 1000, a tenth of the rows displaced: 1.74 M -> 1.67 M
+/// instructions) and the contamination study's f32 runs silently wrong
+/// moved from 15 to 14 of 18 688.
 pub const SUBSAMPLE_ROWS: usize = 256;
 
 /// The subsample stride for `rows` rows ([`SUBSAMPLE_ROWS`]).
@@ -479,18 +484,28 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
         };
         if passes == 0 {
             let mut at = [[0usize; 2]; 3];
+            let mut sub_rows = 0;
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-                fill_first(block, prev, &gate, (&box_lo, &box_hi), &mut at, &mut h);
+                sub_rows += fill_first(
+                    block,
+                    prev,
+                    &gate,
+                    (&box_lo, &box_hi),
+                    every,
+                    &mut at,
+                    &mut h,
+                );
             }
-            let mut levels = clip_levels(scan.used, (&box_lo, &box_hi), &at);
-            level_passes = interior_levels(samples, &gate, &h, scan.used, &mut levels);
+            let mut levels = clip_levels(sub_rows, (&box_lo, &box_hi), &at);
+            level_passes = interior_levels(samples, &gate, &h, every, sub_rows, &mut levels);
+            level_passes += confirm_levels(samples, &gate, scan.used, &mut levels);
             rules = Rules {
                 glitches: scan.rules.glitches,
                 ..Rules::with_clip(levels)
             };
         } else {
             for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-                fill(block, prev, &gate, &mut h);
+                fill(block, prev, &gate, every, &mut h);
             }
         }
         passes += 1;
@@ -552,20 +567,26 @@ fn bounds<T: Real, S: Sample>(
 }
 
 /// [`fill`], also counting per axis the rows at the smallest and the
-/// largest value (`at`).
+/// largest value (`at`); returns the rows it added.
 #[inline(never)]
 fn fill_first<T: Real, S: Sample>(
     block: &[S],
     prev: Option<&S>,
     gate: &Gate<T>,
     (lo, hi): (&[T; 3], &[T; 3]),
+    stride: usize,
     at: &mut [[usize; 2]; 3],
     h: &mut AxisHistograms<T>,
-) {
+) -> usize {
     // Counted in locals, written out per axis (a loop over the axes stays
     // one at opt-level "s", and counts in memory are stored every row).
     let [[mut n0, mut n1], [mut n2, mut n3], [mut n4, mut n5]] = *at;
-    for y in gate.rows(block, prev) {
+    let mut rows = 0;
+    for (_, s, last) in every(block, prev, stride) {
+        let Some(y) = gate.pass(s, last) else {
+            continue;
+        };
+        rows += 1;
         n0 += usize::from(y[0] == lo[0]);
         n1 += usize::from(y[0] == hi[0]);
         n2 += usize::from(y[1] == lo[1]);
@@ -575,12 +596,14 @@ fn fill_first<T: Real, S: Sample>(
         h.add(y);
     }
     *at = [[n0, n1], [n2, n3], [n4, n5]];
+    rows
 }
 
-/// The clip levels: an axis's extreme value that at least
-/// [`crate::rules::CLIP_SHARE`] of the rows (and
+/// The candidate clip levels: an axis's extreme value that at least
+/// [`crate::rules::CLIP_SHARE`] of the `used` rows of the subsample (and
 /// [`crate::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
-/// that hardly varies (planar data) is no clipping.
+/// that hardly varies (planar data) is no clipping ([`confirm_levels`]
+/// counts them on every row).
 fn clip_levels<T: Real>(
     used: usize,
     (lo, hi): (&[T; 3], &[T; 3]),
@@ -605,27 +628,35 @@ fn clip_levels<T: Real>(
     out
 }
 
-/// Clip levels inside an axis's range: a value that at least
-/// [`crate::rules::CLIP_SHARE`] of the rows (and
-/// [`crate::rules::CLIP_MIN_ROWS`]) share exactly, on a side of an axis
-/// whose extreme is no clip level. A clip that left some rows beyond it
-/// (an axis clipped on some reads only) puts such a value inside the
-/// range, where the extremes' count does not see it; its bin of the first
-/// pass's histogram `h` stands out of its neighbours ([`CLIP_SPIKE`]),
-/// where that histogram resolves the axis.
-/// Only when one does, two passes: a majority vote among the rows in that
-/// bin gives the value, a count confirms it. Returns the passes taken.
+/// Candidate clip levels inside an axis's range: a value that many rows
+/// share exactly, on a side of an axis whose extreme is no clip level. A clip
+/// that left some rows beyond it (an axis clipped on some reads only) puts
+/// such a value inside the range, where the extremes' count does not see
+/// it; its bin of the first pass's histogram `h`
+/// (of the `counted` rows of the subsample, every `stride`-th) stands
+/// out of its neighbours ([`CLIP_SPIKE`]), where that histogram
+/// resolves the axis, and holds at least twice a clip level's share (with
+/// once the share, a bin of a few rows stood out by chance on the
+/// benchmark's sphere with a tenth of its rows displaced, and the search
+/// ran for nothing). Only when one does, one pass over the subsample: a
+/// majority vote among the rows in that bin gives a candidate value,
+/// which [`confirm_levels`] counts on every row. Returns the passes
+/// taken.
 #[inline(never)]
 fn interior_levels<T: Real, S: Sample>(
     samples: &[S],
     gate: &Gate<T>,
     h: &AxisHistograms<T>,
-    used: usize,
+    stride: usize,
+    counted: usize,
     levels: &mut [[T; 2]; 3],
 ) -> u32 {
     const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
-    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
-    let least = u32::try_from(many).unwrap_or(u32::MAX);
+    let many = (counted / PER_ROW).max(CLIP_MIN_ROWS);
+    // The subsample's bins hold a few rows each, and one of them stands out
+    // of its neighbours by chance unless it holds twice a clip level's
+    // share.
+    let least = u32::try_from(2 * many).unwrap_or(u32::MAX);
     // Per axis and side the bin to look in (0: none; the counter index
     // otherwise, never 0, the counter below the window).
     let mut bins = [[0usize; 2]; 3];
@@ -648,10 +679,13 @@ fn interior_levels<T: Real, S: Sample>(
         return 0;
     }
     // Boyer-Moore majority vote per bin: the value a majority of the bin's
-    // rows share, if any (the count below confirms it).
+    // rows share, if any (`confirm_levels` counts it).
     let mut votes = [[(T::zero(), 0u32); 2]; 3];
     for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-        for y in gate.rows(block, prev) {
+        for (_, s, last) in every(block, prev, stride) {
+            let Some(y) = gate.pass(s, last) else {
+                continue;
+            };
             for (a, (b, v)) in bins.iter().zip(votes.iter_mut()).enumerate() {
                 let k = h.counter_of(a, y[a]);
                 for (&bin, (value, count)) in b.iter().zip(v.iter_mut()) {
@@ -669,28 +703,52 @@ fn interior_levels<T: Real, S: Sample>(
             }
         }
     }
-    let mut shared = [[0usize; 2]; 3];
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
-        for y in gate.rows(block, prev) {
-            for (a, (b, (v, n))) in bins
-                .iter()
-                .zip(votes.iter().zip(shared.iter_mut()))
-                .enumerate()
-            {
-                for ((&bin, &(value, _)), n) in b.iter().zip(v).zip(n.iter_mut()) {
-                    *n += usize::from(bin != 0 && y[a] == value);
-                }
-            }
-        }
-    }
-    for (((b, v), n), l) in bins.iter().zip(&votes).zip(&shared).zip(levels.iter_mut()) {
-        for (((&bin, &(value, _)), &n), level) in b.iter().zip(v).zip(n).zip(l.iter_mut()) {
-            if bin != 0 && n >= many && n <= used / 2 {
+    // The candidates; `confirm_levels` counts them on every row.
+    for ((b, v), l) in bins.iter().zip(&votes).zip(levels.iter_mut()) {
+        for ((&bin, &(value, count)), level) in b.iter().zip(v).zip(l.iter_mut()) {
+            if bin != 0 && count > 0 {
                 *level = value;
             }
         }
     }
-    2
+    1
+}
+
+/// Keeps the candidate clip levels (`levels`, `T::MAX` for none) that
+/// at least [`crate::rules::CLIP_SHARE`] of the `used` rows `gate`
+/// passes (and [`crate::rules::CLIP_MIN_ROWS`]) share exactly, but not
+/// most of them: one pass over every row, only when there is a
+/// candidate. Returns the passes taken. The candidates come from a
+/// subsample, whose counts are too few to decide: on a real recording
+/// (`imu_gnss_1252.csv`, 1252 rows) 5 of the 313 rows of the subsample
+/// shared an axis's extreme, 12 of all the rows (a clip level needs 19).
+#[inline(never)]
+fn confirm_levels<T: Real, S: Sample>(
+    samples: &[S],
+    gate: &Gate<T>,
+    used: usize,
+    levels: &mut [[T; 2]; 3],
+) -> u32 {
+    if !levels.iter().flatten().any(|l| l.abs() < T::MAX) {
+        return 0;
+    }
+    let mut shared = [[0usize; 2]; 3];
+    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+        for y in gate.rows(block, prev) {
+            for ((n, l), v) in shared.iter_mut().zip(levels.iter()).zip(y) {
+                n[0] += usize::from(v == l[0]);
+                n[1] += usize::from(v == l[1]);
+            }
+        }
+    }
+    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
+    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
+    for (l, &n) in levels.iter_mut().flatten().zip(shared.iter().flatten()) {
+        if !(n >= many && n <= used / 2) {
+            *l = T::MAX;
+        }
+    }
+    1
 }
 
 /// Adds the rows of `block` that the gate passes to the histograms.
@@ -699,10 +757,13 @@ fn fill<T: Real, S: Sample>(
     block: &[S],
     prev: Option<&S>,
     gate: &Gate<T>,
+    stride: usize,
     h: &mut AxisHistograms<T>,
 ) {
-    for y in gate.rows(block, prev) {
-        h.add(y);
+    for (_, s, last) in every(block, prev, stride) {
+        if let Some(y) = gate.pass(s, last) {
+            h.add(y);
+        }
     }
 }
 
