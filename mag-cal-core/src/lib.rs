@@ -174,8 +174,8 @@
 //!
 //! LS9 + ADC2 on 1000 `[i16; 3]` samples in `f32` on a Cortex-M4F: about
 //! 400 000 instructions on clean samples (two passes over the samples for
-//! the fit, one for the scan and one for the figures); 0.7-1.7 M on samples
-//! with 10 % of the rows contaminated, and about 8.5 M when a result in
+//! the fit, one for the scan and one for the figures); 0.7-1.6 M on samples
+//! with 10 % of the rows contaminated, and about 8.3 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
 //! 46 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
 //! variant.

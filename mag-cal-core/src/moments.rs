@@ -155,7 +155,7 @@ impl<T: Real> Moments<T> {
             Some((r, strong)) => (Some(r), strong),
             None => (None, T::MAX),
         };
-        let mut finder = runs.map(RunFinder::new);
+        let mut finder = runs.map(|r| RunFinder::new(r, stride));
         let mut sums = [T::zero(); COUNT];
         let (low, high) = sums.split_at_mut(LOW);
         for (start, prev, block) in skip.pieces(samples, BLOCK) {

@@ -28,25 +28,32 @@
 //!
 //! The crude start and the refits run on a fixed subsample of about
 //! [`crate::screen::SUBSAMPLE_ROWS`] rows until its count of rows kept
-//! settles (changes by at most one). Then one pass on every row finds the
-//! runs of rows far beyond the cut ([`crate::runs`]) and measures the
-//! residuals' sigma there, and one refit on every row follows, which skips
-//! the rows beside the runs, as every later pass does. The finding pass
-//! sums no moments (a limit of zero keeps no row). When it refitted as
-//! well, it cost about 100 instructions a kept row more on a Cortex-M4F
-//! (LS9 + ADC2, n = 1000, a tenth of the rows displaced: 1.85 M against
-//! 1.75 M instructions) for little (the contamination study,
-//! `docs/results.md`: robust ADC2 silently wrong in 12 of 18 688 f32 runs
-//! then, 15 without it; every cell within its target); a single refit on
-//! every row with no finding pass before it left a disturbance moving
-//! past the sensor over a tenth of the rows at median error ratios of
-//! 1.27 / 1.39 (target 1.3). From a window start (below), whose subsample left out
-//! half the rows, the finding pass refits too: from the subsample's fit
-//! alone, a recording of level turns (the heading scenario of the paper
-//! tables) was refused as a systematic misfit. Without a subsample (fewer
-//! than twice [`crate::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`]
-//! passes run on every row until the count repeats, the third the finding
-//! pass.
+//! settles (changes by at most one). From the crude start, the untrimmed
+//! refits on the subsample also find the runs of rows far beyond the cut
+//! ([`crate::runs`]; six consecutive rows of the subsample), those of the
+//! last one stand, and one refit on every row follows, which skips the
+//! rows beside them, as every later pass does. Measured on a Cortex-M4F
+//! (LS9 + ADC2, n = 1000, a tenth of the rows displaced): 1.56 M
+//! instructions; a pass on every row that found the runs before that
+//! refit cost 0.11 M more, and 0.2 M more when it refitted as well (the
+//! contamination study, `docs/results.md`: robust ADC2 silently wrong in
+//! 14 of 18 688 f32 runs, as with the pass that found the runs only; every
+//! cell within its target). The subsample sees a
+//! run only when it lasts six of its rows: on a real recording with a
+//! magnet passing (`mag3_raw_541.csv`, a CLI test) the span began 21 rows
+//! later, and the hard iron stayed as close to that of the clean rows (0.6
+//! counts of a 3 480-count field). A single refit on every row with no
+//! run found before it left a disturbance moving past the sensor over a
+//! tenth of the rows at median error ratios of 1.27 / 1.39 (target 1.3),
+//! and one-step ADC2 from the subsample's fit alone, 1.3-1.5 in every
+//! contaminated cell. From a window start (below), whose subsample left
+//! out half the rows, the first pass on every row finds the runs and
+//! refits: from the subsample's fit alone, a recording of level turns (the
+//! heading scenario of the paper tables) was refused as a systematic
+//! misfit. Without a subsample (fewer than twice
+//! [`crate::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`] passes run on
+//! every row until the count repeats, the third finding the runs and
+//! refitting nothing (a limit of zero keeps no row).
 //!
 //! A disturbance of a fifth of the recording or more can bend the fit from
 //! the crude start into a compromise that keeps nearly every row. When the
@@ -319,7 +326,16 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     } else {
         (0, REFITS)
     };
+    // From the crude start, the subsample's untrimmed refits find the runs
+    // (those of the last one stand); then one refit on every row follows,
+    // not a pass that finds them and a refit.
+    let sub_finds = every > 1 && window.is_empty();
     for (rounds, rows) in [(sub_refits, every), (full_refits, 1)] {
+        let rounds = if rows == 1 && found && every > 1 {
+            rounds - 1
+        } else {
+            rounds
+        };
         let mut last_kept = None;
         for _ in 0..rounds {
             // `passes` counts the crude start's pass: the refits after the
@@ -329,16 +345,23 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             let limit = trimmed.map_or(sigma * T::lit(OUTLIER_CUT), |t| {
                 smaller(sigma * T::lit(OUTLIER_CUT), t)
             });
-            // The first pass on every row after two refits finds the runs
-            // of rejected rows; the passes after it skip the rows beside
-            // them. From the crude start it refits nothing (a limit of zero
-            // keeps no row, and its moments cost nothing): the refit after
-            // it starts from the subsample's fit. From a window start,
-            // whose subsample left out half the rows, it refits too.
-            let find = rows == 1 && passes >= 3 && !found;
-            let only_find = find && window.is_empty();
-            let (skip, out) = if find {
+            // Which pass finds the runs of rejected rows (the passes on
+            // every row after it skip the rows beside them): from the crude
+            // start each untrimmed refit on the subsample; otherwise the
+            // first pass on every row after two refits, which refits
+            // nothing without a window (a limit of zero keeps no row, and
+            // its moments cost nothing) and refits from a window start,
+            // whose subsample left out half the rows.
+            let find = if rows > 1 {
+                sub_finds && trimmed.is_none()
+            } else {
+                passes >= 3 && !found
+            };
+            let only_find = find && rows == 1 && window.is_empty();
+            let (skip, out) = if find && rows == 1 {
                 (&Runs::NONE, Some(&mut *runs))
+            } else if find {
+                (window, Some(&mut *runs))
             } else if rows > 1 {
                 (window, None)
             } else {
@@ -375,7 +398,7 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
                 break;
             }
             // A count before rows were left out says nothing of the next.
-            last_kept = (trimmed.is_none() && !find).then_some(kept);
+            last_kept = (trimmed.is_none() && !(find && rows == 1)).then_some(kept);
         }
     }
     Ok(RobustLs {

@@ -10,9 +10,10 @@
 //! (spans that touch merge). Rejected rows scattered in time (glitches,
 //! isolated displacements) leave their neighbours alone.
 //!
-//! The spans are found once, in the robust LS fit's first pass on every
-//! row after two refits on fewer rows (from the crude start, a pass that
-//! refits nothing); the later refits, the method's passes
+//! The spans are found by the robust LS fit's refits on a subsample (every
+//! `k`-th row; then six consecutive rows of the subsample are a run, and
+//! the rows between them count too), or without one by its first pass on
+//! every row after two refits; the later refits, the method's passes
 //! and the final pass skip them, and [`crate::Selection::classify`] reports their rows
 //! as rejected. At most [`RUNS`] spans are kept: later runs are left to the
 //! residual cut, and their count is reported ([`Runs::missed`]).
@@ -173,20 +174,24 @@ impl Runs {
 #[derive(Debug)]
 pub(crate) struct RunFinder<'a> {
     /// The first and the last row of the latest stretch of consecutive
-    /// rejected rows.
-    stretch: Option<(usize, usize)>,
+    /// rejected rows, and how many rows of it were seen (0: none yet; no
+    /// `Option`, whose tag took 4 bytes of the deepest frame).
+    stretch: (usize, usize, usize),
     /// The span still growing.
     open: Option<(usize, usize)>,
+    /// Rows between consecutive rows seen (a subsample's stride).
+    step: usize,
     runs: &'a mut Runs,
 }
 
 impl<'a> RunFinder<'a> {
-    /// A finder that writes into `runs` (cleared).
-    pub(crate) fn new(runs: &'a mut Runs) -> Self {
+    /// A finder that writes into `runs` (cleared), of every `step`-th row.
+    pub(crate) fn new(runs: &'a mut Runs, step: usize) -> Self {
         *runs = Runs::NONE;
         Self {
-            stretch: None,
+            stretch: (0, 0, 0),
             open: None,
+            step: step.max(1),
             runs,
         }
     }
@@ -194,15 +199,21 @@ impl<'a> RunFinder<'a> {
     /// Row `i` was rejected by its residual (rows in ascending order).
     #[inline(never)]
     pub(crate) fn reject(&mut self, i: usize) {
-        let first = match self.stretch {
-            Some((first, last)) if last.checked_add(1) == Some(i) => first,
-            _ => i,
+        let step = self.step;
+        let (first, last, seen) = self.stretch;
+        // A subsample's rows are `step` apart, or fewer across the blocks
+        // of a pass.
+        let (first, seen) = if seen > 0 && i > last && i - last <= step {
+            (first, seen + 1)
+        } else {
+            (i, 1)
         };
-        self.stretch = Some((first, i));
-        if i.saturating_sub(first) + 1 >= RUN_LENGTH {
+        self.stretch = (first, i, seen);
+        if seen >= RUN_LENGTH {
+            // The rows between the rows seen count as rejected too.
             let span = (
-                first.saturating_sub(MARGIN),
-                i.saturating_add(MARGIN).saturating_add(1),
+                first.saturating_sub(MARGIN + step - 1),
+                i.saturating_add(MARGIN).saturating_add(step),
             );
             self.open = match self.open {
                 Some((s, e)) if span.0 <= e => Some((s, e.max(span.1))),
@@ -250,7 +261,7 @@ mod tests {
     /// The runs found from the rejected rows `rejected` of `rows` rows.
     fn found(rows: usize, rejected: impl IntoIterator<Item = usize>) -> Runs {
         let mut runs = Runs::NONE;
-        let mut f = RunFinder::new(&mut runs);
+        let mut f = RunFinder::new(&mut runs, 1);
         for i in rejected {
             f.reject(i);
         }
@@ -269,6 +280,36 @@ mod tests {
         let rejected = (100..100 + RUN_LENGTH - 1).chain((200..240).step_by(2));
         let runs = found(300, rejected);
         assert!(runs.is_empty(), "{runs:?}");
+    }
+
+    #[test]
+    fn a_subsample_s_rows_in_a_row_are_a_run_with_the_rows_between() {
+        // Every third row, half of them each side of a block boundary
+        // (at 384, where the rows seen are two apart): RUN_LENGTH of them
+        // are a run, the rows between and beside them rejected too.
+        let step = 3;
+        let first = 384 - step * (RUN_LENGTH / 2 - 1);
+        let rejected =
+            (0..RUN_LENGTH)
+                .map(|k| first + step * k)
+                .map(|i| if i > 384 { i - 1 } else { i });
+        let last = rejected.clone().next_back().unwrap();
+        let mut runs = Runs::NONE;
+        let mut f = RunFinder::new(&mut runs, step);
+        for i in rejected {
+            f.reject(i);
+        }
+        f.finish(1000);
+        let span = (first - MARGIN - (step - 1), last + MARGIN + step);
+        assert_eq!(runs.spans(), &[span]);
+        // One row short of a run of the subsample.
+        let mut runs = Runs::NONE;
+        let mut f = RunFinder::new(&mut runs, step);
+        for k in 0..RUN_LENGTH - 1 {
+            f.reject(600 + step * k);
+        }
+        f.finish(1000);
+        assert!(runs.is_empty());
     }
 
     #[test]
