@@ -321,21 +321,16 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
     let every = stride(screening.valid);
     // On a subsample the refits run until its kept count settles, and two
     // more on every row settle the fit; without one, all run on every row.
-    let (sub_refits, full_refits) = if every > 1 {
-        (REFITS - 2, 2)
-    } else {
-        (0, REFITS)
-    };
     // From the crude start, the subsample's untrimmed refits find the runs
-    // (those of the last one stand); then one refit on every row follows,
-    // not a pass that finds them and a refit.
+    // (those of the last one stand; the first refit is one); then one refit
+    // on every row follows, not a pass that finds them and a refit.
     let sub_finds = every > 1 && window.is_empty();
+    let (sub_refits, full_refits) = match (every > 1, sub_finds) {
+        (true, true) => (REFITS - 2, 1),
+        (true, false) => (REFITS - 2, 2),
+        (false, _) => (0, REFITS),
+    };
     for (rounds, rows) in [(sub_refits, every), (full_refits, 1)] {
-        let rounds = if rows == 1 && found && every > 1 {
-            rounds - 1
-        } else {
-            rounds
-        };
         let mut last_kept = None;
         for _ in 0..rounds {
             // `passes` counts the crude start's pass: the refits after the

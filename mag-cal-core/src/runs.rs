@@ -13,9 +13,9 @@
 //! The spans are found by the robust LS fit's refits on a subsample (every
 //! `k`-th row; then six consecutive rows of the subsample are a run, and
 //! the rows between them count too), or without one by its first pass on
-//! every row after two refits; the later refits, the method's passes
-//! and the final pass skip them, and [`crate::Selection::classify`] reports their rows
-//! as rejected. At most [`RUNS`] spans are kept: later runs are left to the
+//! every row after two refits; the later refits, the method's passes and
+//! the final pass skip them, and [`crate::Selection::classify`] reports
+//! their rows as rejected. At most [`RUNS`] spans are kept: later runs are left to the
 //! residual cut, and their count is reported ([`Runs::missed`]).
 //!
 //! Measured on the contamination study (`docs/results.md`, f32, 64 runs a

@@ -89,16 +89,17 @@ pub const RECENTRE_GAIN: f64 = 0.5;
 /// centre stays (the coverage refusal then names the cause).
 pub const RECENTRE_MORE_ROWS: u32 = 16;
 
-/// The median centre's histograms (with the clip levels at the axes'
-/// extremes), the median distance, the shell band and the crude start,
-/// and the robust LS refits before the pass that finds the runs of
-/// rejected rows, run on a fixed subsample of about this many rows (every
-/// `k`-th row, `k` at least 1). A quantile or the set of outliers is
-/// settled as well on a few hundred rows as on all of them, at a fraction
-/// of the passes' cost. The bounds of the first median-centre window come
-/// from it too; the finding pass and the last refit see every row. The median centre's first histogram on every row
-/// instead cost about 125 instructions a row on a Cortex-M4F (LS9 + ADC2,
-/// n = 1000, a tenth of the rows displaced: 1.74 M -> 1.67 M
+/// The median centre's histograms (with the candidate clip levels), the
+/// median distance, the shell band and the crude start, and the robust LS
+/// refits before the last one (which also find the runs of rejected rows,
+/// [`crate::runs`]), run on a fixed subsample of about this many rows
+/// (every `k`-th row, `k` at least 1). A quantile or the set of outliers
+/// is settled as well on a few hundred rows as on all of them, at a
+/// fraction of the passes' cost. The bounds of the first median-centre
+/// window come from it too; the count that confirms a clip level and the
+/// last refit see every row. The median centre's first histogram on every
+/// row instead cost about 125 instructions a row on a Cortex-M4F (LS9 +
+/// ADC2, n = 1000, a tenth of the rows displaced: 1.74 M -> 1.67 M
 /// instructions) and the contamination study's f32 runs silently wrong
 /// moved from 15 to 14 of 18 688.
 pub const SUBSAMPLE_ROWS: usize = 256;
@@ -609,11 +610,8 @@ fn clip_levels<T: Real>(
     (lo, hi): (&[T; 3], &[T; 3]),
     at: &[[usize; 2]; 3],
 ) -> [[T; 2]; 3] {
-    // `used * CLIP_SHARE` in integers (no soft-float `f64` on the target).
-    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
-    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
     let level = |v: T, n: usize| {
-        if n >= many && n <= used / 2 {
+        if shared_by_many(n, used) {
             v
         } else {
             T::MAX
@@ -651,12 +649,10 @@ fn interior_levels<T: Real, S: Sample>(
     counted: usize,
     levels: &mut [[T; 2]; 3],
 ) -> u32 {
-    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
-    let many = (counted / PER_ROW).max(CLIP_MIN_ROWS);
     // The subsample's bins hold a few rows each, and one of them stands out
     // of its neighbours by chance unless it holds twice a clip level's
     // share.
-    let least = u32::try_from(2 * many).unwrap_or(u32::MAX);
+    let least = u32::try_from(2 * clip_rows(counted)).unwrap_or(u32::MAX);
     // Per axis and side the bin to look in (0: none; the counter index
     // otherwise, never 0, the counter below the window).
     let mut bins = [[0usize; 2]; 3];
@@ -741,14 +737,28 @@ fn confirm_levels<T: Real, S: Sample>(
             }
         }
     }
-    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
-    let many = (used / PER_ROW).max(CLIP_MIN_ROWS);
     for (l, &n) in levels.iter_mut().flatten().zip(shared.iter().flatten()) {
-        if !(n >= many && n <= used / 2) {
+        if !shared_by_many(n, used) {
             *l = T::MAX;
         }
     }
     1
+}
+
+/// The rows a clip level needs of `rows` rows:
+/// [`crate::rules::CLIP_SHARE`] of them, and at least
+/// [`crate::rules::CLIP_MIN_ROWS`] (in integers: no soft-float `f64` on
+/// the target).
+fn clip_rows(rows: usize) -> usize {
+    const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
+    (rows / PER_ROW).max(CLIP_MIN_ROWS)
+}
+
+/// Whether `n` of `rows` rows sharing a value make it a clip level: a clip
+/// level's share ([`clip_rows`]), but not most of the rows (an axis that
+/// hardly varies is no clipping).
+fn shared_by_many(n: usize, rows: usize) -> bool {
+    n >= clip_rows(rows) && n <= rows / 2
 }
 
 /// Adds the rows of `block` that the gate passes to the histograms.
