@@ -687,9 +687,11 @@ pub const AMBIGUOUS_SCORE: f64 = 1.25;
 /// ([`robust::STARTS`]) and from the crude start is scored (the median
 /// residual over the subsample, [`robust::window`], [`AMBIGUOUS_SCORE`]),
 /// and the path runs
-/// again from the start that scored best. Every attempt repeats the
-/// screening: no fit is kept on the stack while another runs. Out of line
-/// (see [`plain_path`]).
+/// again from the window start that scored best; when the crude start
+/// scores best, the first run's fit stands. Every run repeats the
+/// screening: only the first run's fit is kept on the stack while the
+/// starts are scored and the second run goes. Out of line (see
+/// [`plain_path`]).
 #[inline(never)]
 fn robust_path<T: Real, S: Sample>(
     samples: &[S],
@@ -699,7 +701,7 @@ fn robust_path<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let mut first = Attempt::default();
-    let fit = robust_attempt(samples, config, scan, ls_solve, step, 0, 0, &mut first);
+    let mut fit = robust_attempt(samples, config, scan, ls_solve, step, 0, 0, &mut first);
     if !first.doubt {
         return fit;
     }
@@ -707,6 +709,13 @@ fn robust_path<T: Real, S: Sample>(
         return fit;
     };
     let passes = first.passes;
+    if k == 0 {
+        // The crude start scored best: its run is the first one.
+        if let Ok(f) = &mut fit {
+            f.report.robust_passes = passes;
+        }
+        return fit;
+    }
     robust_attempt(samples, config, scan, ls_solve, step, k, passes, &mut first)
 }
 
