@@ -688,10 +688,11 @@ pub const AMBIGUOUS_SCORE: f64 = 1.25;
 /// residual over the subsample, [`robust::window`], [`AMBIGUOUS_SCORE`]),
 /// and the path runs
 /// again from the window start that scored best; when the crude start
-/// scores best, the first run's fit stands. Every run repeats the
-/// screening: only the first run's fit is kept on the stack while the
-/// starts are scored and the second run goes. Out of line (see
-/// [`plain_path`]).
+/// scores best, the first run's fit stands. The screening does not depend
+/// on the start: the scoring makes it once for every start, and each run
+/// makes its own, so that no screening is held on the stack while a
+/// method runs (only the first run's fit is kept while the starts are
+/// scored and the second run goes). Out of line (see [`plain_path`]).
 #[inline(never)]
 fn robust_path<T: Real, S: Sample>(
     samples: &[S],
@@ -720,11 +721,14 @@ fn robust_path<T: Real, S: Sample>(
 }
 
 /// The start of the robust LS ([`robust::window`]) whose fit scores best,
-/// if any fits; adds the passes the scoring took to `passes`. Inlined into
-/// [`robust_path`]: out of line, its frame sat between the robust path's
-/// and the scorer's, and the stack of a result in doubt was 4 116 B
-/// against 4 084 B (the footprint's `-doubtful` run).
-#[inline(always)]
+/// if any fits; adds the passes the scoring took to `passes`. One screening
+/// for every start, held in this frame, which takes the place of the
+/// robust start's ([`start_from`] is inlined into the scorer): a result in
+/// doubt takes 4 068 B of stack (the footprint's `-doubtful` run; 4 092 B
+/// with the scoring inlined into [`robust_path`] and a screening for each
+/// start; 4 116 B with this function out of line and no screening in it),
+/// and `robust-patch-0.3` 7.38 M instructions instead of 8.26 M.
+#[inline(never)]
 fn best_start<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
@@ -732,10 +736,13 @@ fn best_start<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     passes: &mut u32,
 ) -> Option<usize> {
+    // The screening does not depend on the start: made once for all.
+    let screening = screen::screen(samples, scan).ok()?;
+    *passes = passes.saturating_add(screening.passes);
     // The start that scores best, and its score.
     let mut best: Option<(usize, T)> = None;
     for k in 0..=robust::STARTS {
-        let (score, made) = robust_score(samples, config, scan, ls_solve, k);
+        let (score, made) = robust_score(samples, config, scan, &screening, ls_solve, k);
         *passes = passes.saturating_add(made);
         if let Some(s) = score.filter(|&s| best.is_none_or(|(_, b)| s < b)) {
             best = Some((k, s));
@@ -801,13 +808,22 @@ fn robust_score<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
     scan: &normalize::Scan<T>,
+    screening: &screen::Screening<T>,
     ls_solve: ellipsoid::Solve<T>,
     k: usize,
 ) -> (Option<T>, u32) {
     let mut figures = Figures::new(scan, config, true);
     let mut runs = runs::Runs::NONE;
-    let Ok(start) = robust_start(samples, config, scan, ls_solve, &mut figures, &mut runs, k)
-    else {
+    let Ok(start) = start_from(
+        samples,
+        config,
+        screening,
+        0,
+        ls_solve,
+        &mut figures,
+        &mut runs,
+        k,
+    ) else {
         return (None, 0);
     };
     let every = screen::stride(figures.valid);
@@ -866,17 +882,38 @@ fn robust_start<'r, T: Real, S: Sample>(
     runs: &'r mut runs::Runs,
     k: usize,
 ) -> Result<Start<'r, T>, Error> {
-    let window = &robust::window(k, samples.len());
     let screening = screen::screen(samples, scan)?;
+    let passes = screening.passes;
+    start_from(
+        samples, config, &screening, passes, ls_solve, figures, runs, k,
+    )
+}
+
+/// [`robust_start`] from a screening made before, counting `before`
+/// robust passes before it. Inlined: out of line, its frame would sit
+/// below the screening's.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn start_from<'r, T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    screening: &screen::Screening<T>,
+    before: u32,
+    ls_solve: ellipsoid::Solve<T>,
+    figures: &mut Figures<T>,
+    runs: &'r mut runs::Runs,
+    k: usize,
+) -> Result<Start<'r, T>, Error> {
+    let window = &robust::window(k, samples.len());
     figures.drops = screening.drops;
     figures.valid = screening.valid;
     let gate = rules::Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
     };
-    let crude = robust::crude_moments(samples, &screening, &gate, window);
+    let crude = robust::crude_moments(samples, screening, &gate, window);
     figures.flatness = Some(quality::flatness(&crude, crude.count())?);
-    let fitted = match robust::robust_ls(samples, &screening, &gate, &crude, ls_solve, runs, window)
+    let fitted = match robust::robust_ls(samples, screening, &gate, &crude, ls_solve, runs, window)
     {
         Ok(f) => f,
         Err(e) => {
@@ -898,7 +935,7 @@ fn robust_start<'r, T: Real, S: Sample>(
             sigma: Some(fitted.sigma),
             tails_limit: None,
         },
-        robust_passes: screening.passes + fitted.passes,
+        robust_passes: before.saturating_add(fitted.passes),
     };
     Ok(start)
 }
