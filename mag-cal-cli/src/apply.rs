@@ -98,6 +98,9 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErro
         write(&mut out, &line)?;
     }
     out.flush().map_err(CliError::Write)?;
+    if let Some(skipped) = table.skipped.note() {
+        notes.insert(0, format!("input: {skipped}"));
+    }
     if table.columns.picked == Picked::Header {
         notes.insert(0, format!("columns {}", table.columns));
     }

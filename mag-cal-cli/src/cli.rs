@@ -32,6 +32,11 @@ recognised by a Raw: line among the first ten (after a banner, say): x, y, z
 are fields 7-9 and the accelerometer fields 1-3; other lines are skipped, a
 cut-short Raw: line is dropped.
 'nan' and 'inf' are accepted and skipped by the fit (counted as dropped).
+A data line that cannot be read (a field that is not a number, too few
+fields) is kept as a non-finite row, dropped by the fit, and a later copy of
+the header (logs appended to one another) is skipped; the report names the
+first of them ('input', or on stderr). Only when no data line can be read is
+it an error (exit 2, naming the first that failed).
 
 Outliers (unless --plain): rows that are not finite or too large are dropped,
 and so are glitches: exact (0, 0, 0) rows, rows equal to the row before,

@@ -115,8 +115,9 @@ pub struct Quality {
 
 /// Runs `magcal fit`, writing the report to `out`.
 ///
-/// Returns a note for stderr when the sample columns were found in the
-/// header and the report does not say so (`--format json`).
+/// Returns notes for stderr where the report does not say so (`--format
+/// json`): the sample columns, when they were found in the header, and the
+/// lines of the input that were no samples ([`input::Skipped::note`]).
 pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
     let source = Source::from_arg(&args.file);
     let bytes = source.read()?;
@@ -128,6 +129,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError>
         )));
     }
     let table = input::parse(&bytes, args.columns.as_ref(), &source.name())?;
+    let skipped = table.skipped.note();
     let samples = table.samples;
     let config = Config {
         method,
@@ -155,18 +157,23 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError>
         })?;
     }
     let report = match args.format {
-        Format::Text => output::text(&outcome, &source.name(), &table.columns.to_string()),
+        Format::Text => output::text(
+            &outcome,
+            &source.name(),
+            &table.columns.to_string(),
+            skipped.as_deref(),
+        ),
         Format::Json => output::json(&outcome),
     };
     out.write_all(report.as_bytes())
         .and_then(|()| out.flush())
         .map_err(CliError::Write)?;
-    Ok(
-        (args.format == Format::Json && table.columns.picked == Picked::Header)
-            .then(|| format!("columns {}", table.columns))
-            .into_iter()
-            .collect(),
-    )
+    let json = args.format == Format::Json;
+    Ok((json && table.columns.picked == Picked::Header)
+        .then(|| format!("columns {}", table.columns))
+        .into_iter()
+        .chain(skipped.filter(|_| json).map(|s| format!("input: {s}")))
+        .collect())
 }
 
 impl Outcome {

@@ -40,7 +40,13 @@
 //!   as non-finite numbers, which the core skips and counts as dropped;
 //!   finite but absurd values such as `1e308` are passed to the core as
 //!   they are (what to do with them is the core's decision, not the
-//!   parser's).
+//!   parser's);
+//! - a data line that cannot be read (a field that is not a number, too
+//!   few fields: a serial line caught mid-way, a logger's message) is kept
+//!   as a non-finite row, which the fit drops and counts, and a later copy
+//!   of the header line (logs appended to one another) is skipped; both
+//!   are counted and the first few named ([`Skipped`]). Only an input with
+//!   no readable data line is an error, naming the first line that failed.
 
 use std::fmt;
 use std::io::Read;
@@ -208,6 +214,81 @@ pub struct Table {
     pub accel: Option<Vec<[f64; 3]>>,
     /// Where the samples came from.
     pub columns: ColumnsUsed,
+    /// Lines that were neither samples nor comments.
+    pub skipped: Skipped,
+}
+
+/// Lines of an input that were neither samples nor comments nor blank:
+/// data lines that could not be read, each kept as a non-finite row (the
+/// fit drops and counts it; `apply` keeps the row order), and copies of
+/// the header line after the first, skipped.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Skipped {
+    /// Data lines that could not be read.
+    pub unreadable: usize,
+    /// Copies of the header line after the first.
+    pub header_copies: usize,
+    /// The first [`Skipped::EXAMPLES`] of them, e.g. `line 104: 'abc' is
+    /// not a number`.
+    pub examples: Vec<String>,
+}
+
+impl Skipped {
+    /// How many lines [`Skipped::examples`] names at most.
+    pub const EXAMPLES: usize = 3;
+
+    /// Whether every line was a sample, a comment or blank.
+    pub fn is_empty(&self) -> bool {
+        self.unreadable == 0 && self.header_copies == 0
+    }
+
+    /// One line for a report, e.g. `2 unreadable lines kept as non-finite
+    /// rows (dropped), 1 copy of the header skipped: line 74: a copy of the
+    /// header; line 104: 'abc' is not a number; ...`; `None` when
+    /// [`Skipped::is_empty`].
+    pub fn note(&self) -> Option<String> {
+        if self.is_empty() {
+            return None;
+        }
+        let plural =
+            |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+        let mut parts = Vec::new();
+        if self.unreadable > 0 {
+            parts.push(format!(
+                "{} kept as non-finite rows (dropped)",
+                plural(self.unreadable, "unreadable line", "unreadable lines")
+            ));
+        }
+        if self.header_copies > 0 {
+            parts.push(format!(
+                "{} skipped",
+                plural(
+                    self.header_copies,
+                    "copy of the header",
+                    "copies of the header"
+                )
+            ));
+        }
+        let total = self.unreadable + self.header_copies;
+        let more = if total > self.examples.len() {
+            "; ..."
+        } else {
+            ""
+        };
+        Some(format!(
+            "{}: {}{more}",
+            parts.join(", "),
+            self.examples.join("; ")
+        ))
+    }
+
+    /// Counts one line, naming it while fewer than [`Skipped::EXAMPLES`]
+    /// are named.
+    fn add(&mut self, example: impl FnOnce() -> String) {
+        if self.examples.len() < Self::EXAMPLES {
+            self.examples.push(example());
+        }
+    }
 }
 
 /// The columns the samples were read from, and the rule that chose them.
@@ -345,23 +426,62 @@ pub fn parse_with_accel(
     let data_first = (!has_header).then_some((first_no, first));
     let mut samples = Vec::new();
     let mut accel_rows = accel_indices.map(|_| Vec::new());
+    let mut skipped = Skipped::default();
+    // The first line that could not be read: the error when none could.
+    let mut first_error = None;
+    let mut readable = 0usize;
     for (line_no, line) in data_first.into_iter().chain(lines) {
         let fields = separator.fields(line);
-        samples.push(parse_row(line_no, &fields, &indices)?);
-        if let (Some(rows), Some(accel_indices)) = (accel_rows.as_mut(), accel_indices.as_ref()) {
-            rows.push(parse_row(line_no, &fields, accel_indices)?);
+        if header.is_some_and(|h| same_fields(h, &fields)) {
+            skipped.header_copies += 1;
+            skipped.add(|| format!("line {line_no}: a copy of the header"));
+            continue;
+        }
+        let row = parse_row(line_no, &fields, &indices).and_then(|sample| {
+            let accel = match accel_indices.as_ref() {
+                Some(accel_indices) => Some(parse_row(line_no, &fields, accel_indices)?),
+                None => None,
+            };
+            Ok((sample, accel))
+        });
+        let (sample, accel) = match row {
+            Ok(row) => {
+                readable += 1;
+                row
+            }
+            Err(err) => {
+                skipped.unreadable += 1;
+                skipped.add(|| err.to_string());
+                first_error.get_or_insert(err);
+                ([f64::NAN; 3], accel_indices.map(|_| [f64::NAN; 3]))
+            }
+        };
+        samples.push(sample);
+        if let (Some(rows), Some(accel)) = (accel_rows.as_mut(), accel) {
+            rows.push(accel);
         }
     }
-    if samples.is_empty() {
-        return Err(CliError::Input(format!(
-            "{source_name}: no data rows after the header"
-        )));
+    if readable == 0 {
+        return Err(first_error.unwrap_or_else(|| {
+            CliError::Input(format!("{source_name}: no data rows after the header"))
+        }));
     }
     Ok(Table {
         samples,
         accel: accel_rows,
         columns,
+        skipped,
     })
+}
+
+/// Whether a line's fields are the header's (a copy of the header line,
+/// compared without case).
+fn same_fields(header: &[&str], fields: &[&str]) -> bool {
+    header.len() == fields.len()
+        && header
+            .iter()
+            .zip(fields)
+            .all(|(h, f)| h.eq_ignore_ascii_case(f))
 }
 
 /// The rows of a MotionCal log: every `Raw:` line, the magnetometer from
@@ -370,19 +490,31 @@ pub fn parse_with_accel(
 fn motioncal(text: &str, with_accel: bool) -> Table {
     let mut samples = Vec::new();
     let mut accel = Vec::new();
-    for (_, line) in content_lines(text) {
+    let mut skipped = Skipped::default();
+    for (line_no, line) in content_lines(text) {
         let Some(rest) = line.trim_start().strip_prefix(MOTIONCAL_PREFIX) else {
             continue;
         };
-        let values: Vec<f64> = rest
-            .split(',')
-            .map(|f| {
-                number(f.trim())
-                    .filter(|v| v.is_finite())
-                    .unwrap_or(f64::NAN)
-            })
+        let parsed: Vec<Option<f64>> = rest.split(',').map(|f| number(f.trim())).collect();
+        let values: Vec<f64> = parsed
+            .iter()
+            .map(|v| v.filter(|v| v.is_finite()).unwrap_or(f64::NAN))
             .collect();
         let whole = values.len() == 9;
+        // A garbled magnetometer field makes the row non-finite.
+        if !whole || parsed.iter().skip(6).any(Option::is_none) {
+            skipped.unreadable += 1;
+            skipped.add(|| {
+                if whole {
+                    format!("line {line_no}: a magnetometer field is not a number")
+                } else {
+                    format!(
+                        "line {line_no}: {} fields after {MOTIONCAL_PREFIX}, expected 9",
+                        values.len()
+                    )
+                }
+            });
+        }
         let triple = |at: usize| {
             if whole {
                 [values[at], values[at + 1], values[at + 2]]
@@ -400,6 +532,7 @@ fn motioncal(text: &str, with_accel: bool) -> Table {
             names: None,
             picked: Picked::MotionCal,
         },
+        skipped,
     }
 }
 
@@ -948,18 +1081,105 @@ mod tests {
         assert!(err.to_string().contains("needs a header"), "{err}");
     }
 
+    /// Whether every component of every row is NaN.
+    fn all_nan(rows: &[[f64; 3]]) -> bool {
+        rows.iter().flatten().all(|v| v.is_nan())
+    }
+
     #[test]
-    fn parse_errors_name_the_line() {
-        let err = parse(b"x,y,z\n1,2,3\n\n1,abc,3\n", None, "t").unwrap_err();
-        assert_eq!(err.to_string(), "line 4: 'abc' is not a number");
-        assert_eq!(err.exit_code(), 2);
-        let err = parse(b"1,2,3\n1,2\n", None, "t").unwrap_err();
+    fn unreadable_lines_are_named_and_kept_as_non_finite_rows() {
+        let t = parse(b"x,y,z\n1,2,3\n\n1,abc,3\n4,5\n4,,6\n7,8,9\n", None, "t").expect("parses");
+        assert_eq!(t.samples.len(), 5);
         assert_eq!(
-            err.to_string(),
-            "line 2: expected at least 3 fields, found 2"
+            (t.samples[0], t.samples[4]),
+            ([1.0, 2.0, 3.0], [7.0, 8.0, 9.0])
         );
-        let err = parse(b"1,2,3\n1,,3\n", None, "t").unwrap_err();
-        assert_eq!(err.to_string(), "line 2: field 2 is empty");
+        assert!(all_nan(&t.samples[1..4]), "{:?}", t.samples);
+        assert_eq!((t.skipped.unreadable, t.skipped.header_copies), (3, 0));
+        assert_eq!(
+            t.skipped.examples,
+            [
+                "line 4: 'abc' is not a number",
+                "line 5: expected at least 3 fields, found 2",
+                "line 6: field 2 is empty",
+            ]
+        );
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "3 unreadable lines kept as non-finite rows (dropped): line 4: 'abc' is not a \
+                 number; line 5: expected at least 3 fields, found 2; line 6: field 2 is empty"
+            )
+        );
+        // A clean input names nothing.
+        let t = parse(b"x,y,z\n1,2,3\n", None, "t").expect("parses");
+        assert!(t.skipped.is_empty() && t.skipped.note().is_none());
+    }
+
+    #[test]
+    fn copies_of_the_header_are_skipped() {
+        // Two logs appended to one another, the second with the header in
+        // another case; then a line that is not the header.
+        let text = b"MagX,MagY,MagZ\n1,2,3\nmagx,magy,magz\n4,5,6\n7,8,9\nMagX,MagY\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples.len(), 4);
+        assert_eq!(
+            t.samples[..3],
+            [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+        );
+        assert!(all_nan(&t.samples[3..]));
+        assert_eq!((t.skipped.unreadable, t.skipped.header_copies), (1, 1));
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "1 unreadable line kept as non-finite rows (dropped), 1 copy of the header \
+                 skipped: line 3: a copy of the header; line 6: expected at least 3 fields, \
+                 found 2"
+            )
+        );
+    }
+
+    #[test]
+    fn the_examples_stop_at_three() {
+        let mut text = String::from("1,2,3\n");
+        for _ in 0..5 {
+            text.push_str("1,x,3\n");
+        }
+        let t = parse(text.as_bytes(), None, "t").expect("parses");
+        assert_eq!(t.skipped.unreadable, 5);
+        assert_eq!(t.skipped.examples.len(), Skipped::EXAMPLES);
+        let note = t.skipped.note().expect("a note");
+        assert!(
+            note.starts_with("5 unreadable lines") && note.ends_with("; ..."),
+            "{note}"
+        );
+    }
+
+    #[test]
+    fn without_a_readable_line_the_first_failure_is_the_error() {
+        let err = parse(b"x,y,z\n1,abc,3\n1,2\n", None, "t").unwrap_err();
+        assert_eq!(err.to_string(), "line 2: 'abc' is not a number");
+        assert_eq!(err.exit_code(), 2);
+        let err = parse(b"x,y,z\nx,y,z\n", None, "t").unwrap_err();
+        assert_eq!(err.to_string(), "t: no data rows after the header");
+    }
+
+    #[test]
+    fn garbled_motioncal_lines_are_counted() {
+        let text = b"Raw:1,2,3,4,5,6,70,80,90\nRaw:1,2,3,4,5,6,7\nRaw:1,2,3,4,5,6,7,x,9\nRaw:a,2,3,4,5,6,7,8,9\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples.len(), 4);
+        assert_eq!(t.samples[0], [70.0, 80.0, 90.0]);
+        assert!(all_nan(&t.samples[1..2]) && t.samples[2][1].is_nan());
+        // A garbled accelerometer field leaves the magnetometer's.
+        assert_eq!(t.samples[3], [7.0, 8.0, 9.0]);
+        assert_eq!(
+            t.skipped.examples,
+            [
+                "line 2: 7 fields after Raw:, expected 9",
+                "line 3: a magnetometer field is not a number",
+            ]
+        );
     }
 
     #[test]
@@ -967,12 +1187,19 @@ mod tests {
         let mut bytes = b"1,2,3\n1,2,".to_vec();
         bytes.extend_from_slice(&[0xff, b'\r', 0x1b, b'x']);
         bytes.extend(std::iter::repeat_n(b'a', 100));
-        let err = parse(&bytes, None, "t").unwrap_err().to_string();
-        assert!(!err.contains('\r') && !err.contains('\u{1b}'), "{err}");
+        let t = parse(&bytes, None, "t").expect("parses");
+        let note = t.skipped.note().expect("a note");
+        assert!(!note.contains('\r') && !note.contains('\u{1b}'), "{note}");
         assert!(
-            err.starts_with("line 2: '\u{fffd}\\r\\u{1b}x")
-                && err.ends_with("...' is not a number")
+            note.contains(": line 2: '\u{fffd}\\r\\u{1b}x")
+                && note.ends_with("...' is not a number"),
+            "{note}"
         );
+        // The same as the error of an input without a readable line.
+        let alone = [b"x,y,z\n".as_slice(), &bytes[6..]].concat();
+        let err = parse(&alone, None, "t").unwrap_err().to_string();
+        assert!(!err.contains('\r') && !err.contains('\u{1b}'), "{err}");
+        assert!(err.starts_with("line 2: '\u{fffd}\\r\\u{1b}x"), "{err}");
     }
 
     #[test]

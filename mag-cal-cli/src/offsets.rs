@@ -70,5 +70,10 @@ pub fn run(args: &OffsetsArgs, out: &mut dyn Write) -> Result<Vec<String>, CliEr
         }
     };
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
-    Ok(Vec::new())
+    Ok(table
+        .skipped
+        .note()
+        .map(|s| format!("input: {s}"))
+        .into_iter()
+        .collect())
 }

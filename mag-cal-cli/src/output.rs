@@ -23,12 +23,16 @@ pub fn json(outcome: &Outcome) -> String {
 }
 
 /// The text report for `source_name`, whose samples came from `columns`
-/// (one line, e.g. `magx,magy,magz (from the header)`).
-pub fn text(o: &Outcome, source_name: &str, columns: &str) -> String {
+/// (one line, e.g. `magx,magy,magz (from the header)`), with the lines of
+/// the input that were no samples (`skipped`, [`crate::input::Skipped::note`]).
+pub fn text(o: &Outcome, source_name: &str, columns: &str, skipped: Option<&str>) -> String {
     let mut s = String::new();
     // Writing into a String cannot fail; the results are ignored.
     let _ = writeln!(s, "magcal fit: {source_name}");
     let _ = writeln!(s, "  columns       {columns}");
+    if let Some(skipped) = skipped {
+        let _ = writeln!(s, "  input         {skipped}");
+    }
     let _ = writeln!(
         s,
         "  method        {} (LS step {}), precision {}",
@@ -352,7 +356,12 @@ mod tests {
 
     #[test]
     fn text_names_the_parameters() {
-        let t = text(&outcome(), "f.csv", "magx,magy,magz (from the header)");
+        let t = text(
+            &outcome(),
+            "f.csv",
+            "magx,magy,magz (from the header)",
+            None,
+        );
         assert!(
             t.starts_with("magcal fit: f.csv\n  columns       magx,magy,magz (from the header)\n"),
             "{t}"
@@ -396,7 +405,7 @@ mod tests {
         (plain.robust, plain.samples_dropped, plain.rejected) = (false, 0, 0);
         plain.drops = DropCounts::default();
         plain.screened = 4;
-        let t = text(&plain, "f", "c");
+        let t = text(&plain, "f", "c", None);
         assert!(t.contains("  outliers      off (--plain"), "{t}");
         assert!(
             t.contains(
@@ -407,7 +416,7 @@ mod tests {
         );
         let mut quiet = outcome();
         quiet.quality.warnings.clear();
-        assert!(text(&quiet, "f", "c").contains("  warnings      none\n"));
+        assert!(text(&quiet, "f", "c", None).contains("  warnings      none\n"));
         assert!(json(&quiet).contains(r#""warnings":[]"#));
     }
 }

@@ -533,13 +533,80 @@ fn usage_and_input_errors_exit_2() {
         "cannot read /nonexistent/dir/foo.csv: No such file or directory",
     );
     magcal(&["fit", env!("CARGO_MANIFEST_DIR")], None).fails_with(2, "cannot read");
-    let bad = temp_file("bad_line.csv", b"x,y,z\n1,2,3\n\n4,abc,6\n7,8,9\n");
-    magcal(&["fit", &bad], None).fails_with(2, "line 4: 'abc' is not a number");
-    magcal(&["fit", "-"], Some(b"1 2 3\n4 5\n"))
+    // No data line can be read: the first that failed is the error.
+    let bad = temp_file("bad_line.csv", b"x,y,z\n1,abc,3\n\n4,abc,6\n7,8\n");
+    magcal(&["fit", &bad], None).fails_with(2, "line 2: 'abc' is not a number");
+    magcal(&["fit", "-"], Some(b"x y z\n4 5\n"))
         .fails_with(2, "line 2: expected at least 3 fields");
     magcal(&["fit", "-", "--columns", "a,b,c"], Some(b"1,2,3\n"))
         .fails_with(2, "--columns needs a header");
     magcal(&["fit", "-"], Some(b"")).fails_with(2, "no data rows");
+}
+
+/// A recording with lines a logger garbled and a second copy of its header
+/// (two logs appended) calibrates as the clean one: each unreadable line
+/// is a non-finite row, dropped and counted, the header copy is skipped,
+/// and the report names them; `apply` keeps one output row per input row.
+#[test]
+fn unreadable_lines_are_dropped_and_named() {
+    let clean = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
+    let rows: Vec<&str> = clean.lines().collect();
+    let mut dirty = String::from("mx,my,mz\n");
+    for (i, row) in rows.iter().enumerate() {
+        match i {
+            100 => dirty.push_str("-12,x3,40\n"),
+            150 => dirty.push_str("MX,MY,MZ\n"),
+            200 => dirty.push_str("-12,13\n"),
+            _ => {}
+        }
+        dirty.push_str(row);
+        dirty.push('\n');
+    }
+    let path = temp_file("icm20948_garbled.csv", dirty.as_bytes());
+    let want = magcal(
+        &["fit", &real("icm20948_mag_300.csv"), "--format", "json"],
+        None,
+    )
+    .json();
+    let run = magcal(&["fit", &path, "--format", "json"], None);
+    let got = run.json();
+    for k in 0..3 {
+        let (a, b) = (got["hard_iron"][k].as_f64(), want["hard_iron"][k].as_f64());
+        assert!(
+            a.zip(b)
+                .is_some_and(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1.0)),
+            "{got} against {want}"
+        );
+    }
+    assert_eq!(got["drops"]["non_finite"], 2, "{got}");
+    assert_eq!(got["samples_used"], want["samples_used"]);
+    assert_accounts_for(&got, 302);
+    assert_eq!(
+        run.stderr,
+        "magcal: note: input: 2 unreadable lines kept as non-finite rows (dropped), 1 copy of \
+         the header skipped: line 102: 'x3' is not a number; line 153: a copy of the header; \
+         line 204: expected at least 3 fields, found 2\n"
+    );
+    let text = magcal(&["fit", &path], None);
+    assert_eq!(text.code, 0, "{}", text.stderr);
+    assert!(
+        text.stdout
+            .contains("\n  input         2 unreadable lines kept as non-finite rows (dropped), "),
+        "{}",
+        text.stdout
+    );
+    let cal = temp_file("icm20948_garbled.json", run.stdout.as_bytes());
+    let applied = magcal(&["apply", &cal, &path, "--flags"], None);
+    assert_eq!(applied.code, 0, "{}", applied.stderr);
+    let out: Vec<&str> = applied.stdout.lines().collect();
+    // The header, then one row per sample line and per unreadable line.
+    assert_eq!(out.len(), 1 + 302);
+    assert_eq!(out[101], "nan,nan,nan,0,dropped:non_finite");
+    assert!(
+        applied.stderr.contains("input: 2 unreadable lines"),
+        "{}",
+        applied.stderr
+    );
 }
 
 #[test]

@@ -16,8 +16,9 @@
 //! 0 or 2), never 101; on 2 or 3 stderr is exactly one line starting with
 //! `magcal: `; on 0 stderr is empty (or, for `fit --format json` and
 //! `apply`, the line `magcal: note: columns ...` naming the columns found
-//! in the header, and for `apply --flags` the note that the calibration
-//! has no `selection`) and stdout is well formed: one JSON object with
+//! in the header, the line `magcal: note: input: ...` naming the lines
+//! that were no samples, and for `apply --flags` the note that the
+//! calibration has no `selection`) and stdout is well formed: one JSON object with
 //! finite numbers whose row counts agree (drops by rule add up to
 //! `samples_dropped`, the outlier share is the screened and rejected rows'
 //! share, `--plain` screens and rejects nothing) and whose `selection` is
@@ -587,6 +588,7 @@ fn run_and_check(run: &Run) -> Result<i32, String> {
     let mut notes = stderr.lines().peekable();
     if run.apply || run.json {
         notes.next_if(|l| l.starts_with("magcal: note: columns "));
+        notes.next_if(|l| l.starts_with("magcal: note: input: "));
     }
     if run.flags {
         notes.next_if(|l| {

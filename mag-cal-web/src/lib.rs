@@ -113,8 +113,9 @@ impl Options {
 /// for the page and the exit code `magcal fit` would give (0, 2 or 3).
 ///
 /// The JSON: `status` (`"ok"`, `"refused"` or `"error"`), `code`, and
-/// - when the file parsed: `columns` (which columns, and why), `rows`, and
-///   `raw` (every row, `null` for a non-finite value);
+/// - when the file parsed: `columns` (which columns, and why), `rows`,
+///   `raw` (every row, `null` for a non-finite value) and `skipped` (the
+///   lines that were no samples, one sentence, or `null`);
 /// - on success: `json` (the line `magcal fit --format json` prints, to
 ///   save for `magcal apply`), `text` (its text report), `fit` (that JSON
 ///   as an object), per row `classes`, `calibrated` (`W (y - b)`) and
@@ -130,16 +131,25 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
         Ok(parsed) => parsed,
         Err(err) => return failure(&err, json!({})),
     };
+    let skipped = table.skipped.note();
     let doc = json!({
         "columns": table.columns.to_string(),
         "rows": table.samples.len(),
         "raw": table.samples,
+        "skipped": skipped,
     });
     let samples = &table.samples;
     match fit_timed(samples, &options.config(), options.precision, now_us) {
         Ok(o) => {
             let columns = table.columns.to_string();
-            success(&o, samples, &options.name, &columns, doc)
+            success(
+                &o,
+                samples,
+                &options.name,
+                &columns,
+                skipped.as_deref(),
+                doc,
+            )
         }
         Err(err) => failure(&err, doc),
     }
@@ -164,6 +174,7 @@ fn success(
     samples: &[[f64; 3]],
     name: &str,
     columns: &str,
+    skipped: Option<&str>,
     mut doc: Value,
 ) -> (u32, String) {
     let line = output::json(o);
@@ -181,7 +192,7 @@ fn success(
     doc["code"] = json!(0);
     doc["fit"] = serde_json::from_str(&line).unwrap_or(Value::Null);
     doc["json"] = json!(line);
-    doc["text"] = json!(output::text(o, name, columns));
+    doc["text"] = json!(output::text(o, name, columns, skipped));
     doc["classes"] = o
         .classes
         .iter()
@@ -315,7 +326,7 @@ impl Live {
             "raw": samples,
         });
         match fit_timed(samples, &options.config(), options.precision, now_us) {
-            Ok(o) => success(&o, samples, &options.name, &columns, doc),
+            Ok(o) => success(&o, samples, &options.name, &columns, None, doc),
             Err(err) => {
                 doc["progress"] = self.progress_json();
                 failure(&err, doc)

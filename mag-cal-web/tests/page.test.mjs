@@ -152,13 +152,19 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
   const { page, errors, context } = await openPage();
   // A MotionCal log, as a user saves a board's serial output.
   writeFileSync(join(scratch, 'motioncal_log.txt'), rawStream(streamRows().filter((_, i) => i % 6 === 0)));
+  // A shared recording with lines a logger garbled (one with markup in it).
+  const rows = readFileSync(join(REAL, 'icm20948_mag_300.csv'), 'utf8').split('\n');
+  rows.splice(200, 0, '-12,13');
+  rows.splice(100, 0, '-12,<b>x</b>,40');
+  writeFileSync(join(scratch, 'icm20948_garbled.csv'), rows.join('\n'));
   for (const [name, precision, tol] of [
     ['icm20948_mag_300.csv', 'f64', 1e-9],
     ['imu_gnss_1252.csv', 'f64', 1e-9],
     ['mag3_raw_541.csv', 'f32', 1e-5],
     ['motioncal_log.txt', 'f64', 1e-9],
+    ['icm20948_garbled.csv', 'f64', 1e-9],
   ]) {
-    const file = join(name.startsWith('motioncal') ? scratch : REAL, name);
+    const file = join(name.startsWith('motioncal') || name.includes('garbled') ? scratch : REAL, name);
     await page.selectOption('#precision', precision);
     await openFile(page, file);
     assert.match(await page.textContent('#verdict'), /^Calibrated/);
@@ -174,6 +180,13 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
       'motioncal_log.txt': execFileSync(MAGCAL, ['fit', file], { encoding: 'utf8' }).match(/columns +(.*)\n/)[1],
     };
     assert.equal(columns, expected[name] ?? 'the first three fields');
+    // The lines that were no samples, as the CLI names them, as text.
+    const input = execFileSync(MAGCAL, ['fit', file], { encoding: 'utf8' }).match(/\n {2}input +(.*)\n/);
+    assert.equal(await page.locator('[data-name="input"]').count(), input ? 1 : 0);
+    if (input) {
+      assert.equal(await page.textContent('[data-name="input"]'), input[1]);
+      assert.equal(await page.locator('#figures b').count(), 0);
+    }
 
     // The warnings in the words of magcal's text report.
     const report = execFileSync(MAGCAL, ['fit', file, '--precision', precision], { encoding: 'utf8', stdio: 'pipe' });

@@ -295,6 +295,13 @@ function showProgress(p) {
 
 const digits = (v, n = 7) => (Number.isFinite(v) ? Number(v.toPrecision(n)).toString() : String(v));
 
+// Text from the user's file (header names, unreadable fields) as HTML
+// text, never markup.
+function html(text) {
+  const entities = { '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;', "'": '&#39;' };
+  return String(text).replace(/[&<>"']/g, (c) => entities[c]);
+}
+
 function figure(name, value, note = '') {
   const v = typeof value === 'number' ? digits(value) : value;
   const data = typeof value === 'number' ? ` data-value="${value}"` : '';
@@ -316,7 +323,9 @@ function showResult(doc, name) {
   for (const id of ['download', 'copy-c', 'copy-rust']) $(id).disabled = !ok;
   $('send').disabled = !ok || !port;
   if (!ok) {
-    $('figures').innerHTML = doc.columns ? `<p>${doc.rows} rows from ${doc.columns}</p>` : '';
+    $('figures').innerHTML = doc.columns
+      ? `<p>${doc.rows} rows from ${html(doc.columns)}</p>${doc.skipped ? `<p data-name="input">${html(doc.skipped)}</p>` : ''}`
+      : '';
     $('norms').innerHTML = '';
     calView.setPoints([], null, null, null);
     $('report').textContent = '';
@@ -337,7 +346,8 @@ function showResult(doc, name) {
     ${figure('distortion', q.distortion, 'condition number of M; refused above 16')}
     ${figure('lack of fit', q.lack_of_fit, 'systematic misfit; refused above 0.01 when significant')}
     ${figure('outlier share', q.outlier_share, 'refused above 0.25')}
-    ${figure('columns', doc.columns)}
+    ${figure('columns', html(doc.columns))}
+    ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
     ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
     ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
     </table>`;
