@@ -2,7 +2,7 @@
 //!
 //! The format is deliberately loose, to take what loggers write:
 //!
-//! - one sample per line; `\n` or `\r\n` line ends; a UTF-8 byte-order mark
+//! - one sample per line; `\n`, `\r\n` or `\r` line ends; a UTF-8 byte-order mark
 //!   is ignored, invalid UTF-8 is decoded lossily (and then fails to parse
 //!   as a number, naming its line);
 //! - blank lines and lines starting with `#` are skipped;
@@ -159,11 +159,13 @@ fn number(field: &str) -> Option<f64> {
 }
 
 /// The content lines: 1-based line number and text, without comments and
-/// blank lines.
+/// blank lines. Lines end at `\n`, `\r\n` or a lone `\r` (a serial
+/// terminal's log).
 fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     text.split('\n')
+        .flat_map(|line| line.strip_suffix('\r').unwrap_or(line).split('\r'))
         .enumerate()
-        .map(|(i, line)| (i + 1, line.strip_suffix('\r').unwrap_or(line)))
+        .map(|(i, line)| (i + 1, line))
         .filter(|(_, line)| {
             let t = line.trim();
             !t.is_empty() && !t.starts_with('#')
@@ -1140,6 +1142,21 @@ mod tests {
     }
 
     #[test]
+    fn every_line_end_ends_a_line() {
+        for text in [
+            "x,y,z\n1,2,3\n4,5,6\n",
+            "x,y,z\r\n1,2,3\r\n4,5,6\r\n",
+            "x,y,z\r1,2,3\r4,5,6\r",
+        ] {
+            let t = parse(text.as_bytes(), None, "t").expect("parses");
+            assert_eq!(t.samples, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], "{text:?}");
+        }
+        // Line numbers count lone `\r` too.
+        let t = parse(b"x,y,z\r1,2,3\r4,q,6\r", None, "t").expect("parses");
+        assert_eq!(t.skipped.examples, ["line 3: 'q' is not a number"]);
+    }
+
+    #[test]
     fn the_examples_stop_at_three() {
         let mut text = String::from("1,2,3\n");
         for _ in 0..5 {
@@ -1185,21 +1202,24 @@ mod tests {
     #[test]
     fn hostile_fields_stay_on_one_line() {
         let mut bytes = b"1,2,3\n1,2,".to_vec();
-        bytes.extend_from_slice(&[0xff, b'\r', 0x1b, b'x']);
+        bytes.extend_from_slice(&[0xff, 0x07, 0x1b, b'x']);
         bytes.extend(std::iter::repeat_n(b'a', 100));
         let t = parse(&bytes, None, "t").expect("parses");
         let note = t.skipped.note().expect("a note");
-        assert!(!note.contains('\r') && !note.contains('\u{1b}'), "{note}");
         assert!(
-            note.contains(": line 2: '\u{fffd}\\r\\u{1b}x")
+            !note.contains('\u{7}') && !note.contains('\u{1b}'),
+            "{note}"
+        );
+        assert!(
+            note.contains(": line 2: '\u{fffd}\\u{7}\\u{1b}x")
                 && note.ends_with("...' is not a number"),
             "{note}"
         );
         // The same as the error of an input without a readable line.
         let alone = [b"x,y,z\n".as_slice(), &bytes[6..]].concat();
         let err = parse(&alone, None, "t").unwrap_err().to_string();
-        assert!(!err.contains('\r') && !err.contains('\u{1b}'), "{err}");
-        assert!(err.starts_with("line 2: '\u{fffd}\\r\\u{1b}x"), "{err}");
+        assert!(!err.contains('\u{7}') && !err.contains('\u{1b}'), "{err}");
+        assert!(err.starts_with("line 2: '\u{fffd}\\u{7}\\u{1b}x"), "{err}");
     }
 
     #[test]
