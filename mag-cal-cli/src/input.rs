@@ -256,9 +256,10 @@ impl Skipped {
             |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
         let mut parts = Vec::new();
         if self.unreadable > 0 {
-            parts.push(format!(
-                "{} kept as non-finite rows (dropped)",
-                plural(self.unreadable, "unreadable line", "unreadable lines")
+            parts.push(plural(
+                self.unreadable,
+                "unreadable line kept as a non-finite row (dropped)",
+                "unreadable lines kept as non-finite rows (dropped)",
             ));
         }
         if self.header_copies > 0 {
@@ -1134,7 +1135,7 @@ mod tests {
         assert_eq!(
             t.skipped.note().as_deref(),
             Some(
-                "1 unreadable line kept as non-finite rows (dropped), 1 copy of the header \
+                "1 unreadable line kept as a non-finite row (dropped), 1 copy of the header \
                  skipped: line 3: a copy of the header; line 6: expected at least 3 fields, \
                  found 2"
             )
