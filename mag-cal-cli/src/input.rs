@@ -285,8 +285,8 @@ impl Skipped {
         ))
     }
 
-    /// Counts one line, naming it while fewer than [`Skipped::EXAMPLES`]
-    /// are named.
+    /// Names one more line while fewer than [`Skipped::EXAMPLES`] are
+    /// named (the caller counts it).
     fn add(&mut self, example: impl FnOnce() -> String) {
         if self.examples.len() < Self::EXAMPLES {
             self.examples.push(example());
@@ -432,7 +432,6 @@ pub fn parse_with_accel(
     let mut skipped = Skipped::default();
     // The first line that could not be read: the error when none could.
     let mut first_error = None;
-    let mut readable = 0usize;
     for (line_no, line) in data_first.into_iter().chain(lines) {
         let fields = separator.fields(line);
         if header.is_some_and(|h| same_fields(h, &fields)) {
@@ -448,10 +447,7 @@ pub fn parse_with_accel(
             Ok((sample, accel))
         });
         let (sample, accel) = match row {
-            Ok(row) => {
-                readable += 1;
-                row
-            }
+            Ok(row) => row,
             Err(err) => {
                 skipped.unreadable += 1;
                 skipped.add(|| err.to_string());
@@ -464,7 +460,7 @@ pub fn parse_with_accel(
             rows.push(accel);
         }
     }
-    if readable == 0 {
+    if skipped.unreadable == samples.len() {
         return Err(first_error.unwrap_or_else(|| {
             CliError::Input(format!("{source_name}: no data rows after the header"))
         }));
