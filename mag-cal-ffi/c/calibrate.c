@@ -143,12 +143,19 @@ int main(int argc, char **argv) {
     printf("|W (y0 - b)| = %.4f, heading %.2f deg\n", norm, magcal_heading_deg(u));
     if (fabsf(norm - 1.0f) > 0.2f) failed = 1;
 
-    /* Headings smoothed on the circle. */
+    /* Headings smoothed on the circle. A reading in counts as the driver
+     * gives it (magcal_apply_i16) calibrates as the same reading in float. */
     float mean = 0;
     magcal_smoother_init(&smoother, 15);
     for (size_t i = 0; i < n && i < 30; i++) {
-        float y[3] = {samples[i][0], samples[i][1], samples[i][2]};
+        float y[3] = {samples[i][0], samples[i][1], samples[i][2]}, v[3];
         magcal_apply(cal, y, u);
+        if (magcal_apply_i16(cal, samples[i], v) != MAGCAL_STATUS_OK ||
+            memcmp(u, v, sizeof u) != 0) {
+            printf("reading %u: magcal_apply_i16 [%.9g, %.9g, %.9g], magcal_apply [%.9g, %.9g, %.9g]\n",
+                   (unsigned)i, v[0], v[1], v[2], u[0], u[1], u[2]);
+            failed = 1;
+        }
         magcal_smoother_push(&smoother, magcal_heading_deg(u), &mean);
     }
     printf("smoothed heading over the first 30 readings: %.2f deg\n", mean);

@@ -374,12 +374,22 @@ MagcalStatus magcal_calibrate_f32_f64(const float (*samples)[3],
                                       MagcalResult *out);
 
 // The calibrated reading `out[0..3] = W (raw - b)` (on the unit sphere)
-// of `raw[0..3]`, in `float`.
+// of `raw[0..3]`, in `float` (`magcal_apply_i16` takes a reading in
+// integer counts).
 //
 // # Safety
 // Every non-null pointer must point to valid memory of the documented
 // size (writable for outputs) for the duration of the call.
 MagcalStatus magcal_apply(const MagcalCalibration *calibration, const float *raw, float *out);
+
+// `magcal_apply` of a reading in integer counts as the driver gives it,
+// `raw[0..3]` (`int16_t raw[3]`): the same `out` as `magcal_apply` of the
+// reading converted to `float`.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
+MagcalStatus magcal_apply_i16(const MagcalCalibration *calibration, const int16_t *raw, float *out);
 
 // Level heading in degrees in (-180, 180] of a calibrated reading
 // `field[0..3]`: `atan2(-y, x)`; 0 when undefined or `field` is null.

@@ -13,7 +13,7 @@
 //! MagcalStatus s = magcal_calibrate_i16(samples, n, &config, &result);
 //! if (s != MAGCAL_STATUS_OK) printf("%s\n", magcal_error_str(s));
 //! float u[3];
-//! magcal_apply(&result.calibration, raw, u);
+//! magcal_apply_i16(&result.calibration, raw, u); /* int16_t raw[3] */
 //! ```
 #![cfg_attr(target_os = "none", no_std)]
 // Raw pointers from C are the point of this crate; each dereference is
@@ -657,7 +657,8 @@ unsafe fn write3(p: *mut f32, v: [f32; 3]) {
 }
 
 /// The calibrated reading `out[0..3] = W (raw - b)` (on the unit sphere)
-/// of `raw[0..3]`, in `float`.
+/// of `raw[0..3]`, in `float` (`magcal_apply_i16` takes a reading in
+/// integer counts).
 ///
 /// # Safety
 /// Every non-null pointer must point to valid memory of the documented
@@ -675,16 +676,47 @@ pub unsafe extern "C" fn magcal_apply(
     if out.is_null() || !out.is_aligned() {
         return MagcalStatus::NullPointer;
     }
-    // In float, as documented: per reading on a Cortex-M4F, double would be
-    // software floating point (and its code linked for this call alone).
+    // SAFETY: checked above.
+    unsafe { write3(out, apply_f32(c, y)) };
+    MagcalStatus::Ok
+}
+
+/// `W (y - b)` in float, as documented: per reading on a Cortex-M4F,
+/// double would be software floating point (and its code linked for this
+/// call alone).
+fn apply_f32(c: &MagcalCalibration, y: [f32; 3]) -> [f32; 3] {
     let [bx, by, bz] = c.hard_iron.map(|v| v as f32);
     let d = [y[0] - bx, y[1] - by, y[2] - bz];
-    let u = c.soft_iron.map(|row| {
+    c.soft_iron.map(|row| {
         let [w0, w1, w2] = row.map(|v| v as f32);
         w0 * d[0] + w1 * d[1] + w2 * d[2]
-    });
+    })
+}
+
+/// `magcal_apply` of a reading in integer counts as the driver gives it,
+/// `raw[0..3]` (`int16_t raw[3]`): the same `out` as `magcal_apply` of the
+/// reading converted to `float`.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
+#[no_mangle]
+pub unsafe extern "C" fn magcal_apply_i16(
+    calibration: *const MagcalCalibration,
+    raw: *const i16,
+    out: *mut f32,
+) -> MagcalStatus {
+    // SAFETY: null-checked reference to a caller-owned value.
+    let Some(c) = (unsafe { calibration.as_ref() }) else {
+        return MagcalStatus::NullPointer;
+    };
+    if raw.is_null() || !raw.is_aligned() || out.is_null() || !out.is_aligned() {
+        return MagcalStatus::NullPointer;
+    }
+    // SAFETY: 3 readable values per the header.
+    let y = unsafe { [*raw, *raw.add(1), *raw.add(2)] };
     // SAFETY: checked above.
-    unsafe { write3(out, u) };
+    unsafe { write3(out, apply_f32(c, y.map(f32::from))) };
     MagcalStatus::Ok
 }
 
@@ -1122,6 +1154,58 @@ mod tests {
             assert_eq!(
                 magcal_to_bytes(&cal, buf.as_mut_ptr(), buf.len()),
                 MagcalStatus::InvalidArgument
+            );
+        }
+    }
+
+    #[test]
+    fn apply_i16_is_apply_of_the_reading_as_float() {
+        let cal = MagcalCalibration {
+            hard_iron: [181.25, -94.5, 240.125],
+            soft_iron: [
+                [2.9e-3, -1.1e-4, 2.0e-5],
+                [-1.1e-4, 3.3e-3, -2.2e-4],
+                [2.0e-5, -2.2e-4, 3.0e-3],
+            ],
+            field_strength: 330.0,
+        };
+        let values = [i16::MIN, -32767, -4097, -1, 0, 1, 7, 321, 4096, i16::MAX];
+        let (mut u, mut v) = ([f32::NAN; 3], [f32::NAN; 3]);
+        for (i, &x) in values.iter().enumerate() {
+            let raw = [
+                x,
+                values[(i + 3) % values.len()],
+                values[(i + 7) % values.len()],
+            ];
+            let float = raw.map(f32::from);
+            // SAFETY: valid pointers to owned values of the documented size.
+            unsafe {
+                assert_eq!(
+                    magcal_apply_i16(&cal, raw.as_ptr(), u.as_mut_ptr()),
+                    MagcalStatus::Ok
+                );
+                assert_eq!(
+                    magcal_apply(&cal, float.as_ptr(), v.as_mut_ptr()),
+                    MagcalStatus::Ok
+                );
+            }
+            assert_eq!(u.map(f32::to_bits), v.map(f32::to_bits), "{raw:?}");
+            assert!(u.iter().all(|c| c.is_finite()), "{raw:?}");
+        }
+        // SAFETY: null or valid pointers.
+        unsafe {
+            let raw = [1i16, 2, 3];
+            assert_eq!(
+                magcal_apply_i16(core::ptr::null(), raw.as_ptr(), u.as_mut_ptr()),
+                MagcalStatus::NullPointer
+            );
+            assert_eq!(
+                magcal_apply_i16(&cal, core::ptr::null(), u.as_mut_ptr()),
+                MagcalStatus::NullPointer
+            );
+            assert_eq!(
+                magcal_apply_i16(&cal, raw.as_ptr(), core::ptr::null_mut()),
+                MagcalStatus::NullPointer
             );
         }
     }

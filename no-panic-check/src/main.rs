@@ -538,6 +538,7 @@ fn ffi() {
         ));
         let cal = maybe_null(addr_of!((*result).calibration));
         keep(magcal_apply(cal, raw, out3));
+        keep(magcal_apply_i16(cal, maybe_null(BUF_I16[3].as_ptr()), out3));
         keep(magcal_heading_deg(raw));
         keep(magcal_tilt_heading_deg(
             raw,
