@@ -42,8 +42,8 @@ fn main() {
         Some("test") => setup().and_then(|()| test_all()),
         Some("package") => package_check(),
         Some("header") => header(true),
-        Some("c") => setup().and_then(|()| c_tests()),
-        Some("c-footprint") => setup().and_then(|()| c_footprint()),
+        Some("c") => setup().and_then(|()| c_checks()),
+        Some("c-footprint") => setup().and_then(|()| c_footprint_checked()),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
         Some("web") => setup().and_then(|()| web(&args[1..])),
         Some("web-test") => setup().and_then(|()| web_tests()),
@@ -247,7 +247,7 @@ fn test_all() -> Result<(), String> {
     )?;
     examples()?;
     package_check()?;
-    c_tests()?;
+    c_checks()?;
     run_on_qemu("ontarget")?;
     // The board example to copy, on the emulated board.
     run_on_qemu("compass")?;
@@ -584,17 +584,214 @@ fn qemu_args<'a>(seconds: &'a str, semihosting: &'a str, elf: &'a str) -> [&'a s
     ]
 }
 
-/// Footprint of the C API on the Cortex-M4F (`mag-cal-ffi/c/cortex-m/
-/// footprint.c`): flash of the program with one `magcal_calibrate_i16` call
-/// over the same program without it, for the static library with every
-/// method and with LS9 + ADC2 alone (profile `c-m4`: opt-level "s", fat
-/// LTO), and the stack high-water mark of the call (n = 1000, float).
-/// Prints `FOOTPRINT-C <build> flash=<bytes> stack=<bytes>`.
-fn c_footprint() -> Result<(), String> {
+/// Every check of the C API (`cargo xtask c`): [`c_tests`], the README's
+/// example ([`readme_c_example`]) and its footprint figures
+/// ([`c_footprint_checked`]).
+fn c_checks() -> Result<(), String> {
+    c_tests()?;
+    readme_c_example()?;
+    c_footprint_checked()
+}
+
+/// The README's "From C" section: from its heading to the next heading
+/// (outside code blocks).
+fn readme_from_c() -> Result<String, String> {
+    let path = root().join("README.md");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut section = String::new();
+    let (mut inside, mut fenced) = (false, false);
+    for line in text.lines() {
+        if line.starts_with("```") {
+            fenced = !fenced;
+        }
+        if !fenced && line.starts_with('#') {
+            if inside {
+                break;
+            }
+            inside = line == "### From C";
+        }
+        if inside {
+            section.push_str(line);
+            section.push('\n');
+        }
+    }
+    if section.is_empty() {
+        return Err("README.md: no `### From C` section".into());
+    }
+    Ok(section)
+}
+
+/// The contents of the code blocks fenced as ```` ```lang ```` in `text`.
+fn fenced_blocks(text: &str, lang: &str) -> Vec<String> {
+    let mut blocks = Vec::new();
+    // The block being read: whether it is one of `lang`, and its lines.
+    let mut open: Option<(bool, String)> = None;
+    for line in text.lines() {
+        match (open.take(), line.strip_prefix("```")) {
+            (None, Some(info)) => open = Some((info.trim() == lang, String::new())),
+            (Some((wanted, body)), Some(_)) => {
+                if wanted {
+                    blocks.push(body);
+                }
+            }
+            (Some((wanted, mut body)), None) => {
+                body.push_str(line);
+                body.push('\n');
+                open = Some((wanted, body));
+            }
+            (None, None) => {}
+        }
+    }
+    blocks
+}
+
+/// A build command of the README's "From C" section: `cargo` and its
+/// arguments, and the library it gives (the `# -> PATH` line after it).
+struct LibraryCommand {
+    args: Vec<String>,
+    library: PathBuf,
+}
+
+/// The README's two library commands (its ```` ```sh ```` block in "From
+/// C"): for the target (the one with `--target`) and for the host.
+fn readme_library_commands() -> Result<(LibraryCommand, LibraryCommand), String> {
+    let section = readme_from_c()?;
+    let blocks = fenced_blocks(&section, "sh");
+    let [block] = blocks.as_slice() else {
+        return Err(format!(
+            "README.md, From C: {} sh blocks, not one",
+            blocks.len()
+        ));
+    };
+    let mut commands = Vec::new();
+    let mut lines = block.lines().map(str::trim).peekable();
+    while let Some(line) = lines.next() {
+        let Some(rest) = line.strip_prefix("cargo ") else {
+            continue;
+        };
+        let library = lines
+            .next_if(|l| l.starts_with("# -> "))
+            .map(|l| root().join(&l["# -> ".len()..]))
+            .ok_or_else(|| format!("README.md, From C: no `# -> LIBRARY` line after `{line}`"))?;
+        let args = rest.split_whitespace().map(str::to_owned).collect();
+        commands.push(LibraryCommand { args, library });
+    }
+    let found = commands.len();
+    let (target, host): (Vec<_>, Vec<_>) = commands
+        .into_iter()
+        .partition(|c| c.args.iter().any(|a| a == "--target"));
+    match (<[_; 1]>::try_from(target), <[_; 1]>::try_from(host)) {
+        (Ok([target]), Ok([host])) => Ok((target, host)),
+        _ => Err(format!(
+            "README.md, From C: the sh block needs two `cargo` commands, one with `--target` (the target) and one without (the host); found {found}"
+        )),
+    }
+}
+
+/// Runs a README library command (with `--locked` and `extra` arguments
+/// added) and returns the library it gives.
+fn build_readme_library(command: &LibraryCommand, extra: &[&str]) -> Result<PathBuf, String> {
+    let mut args: Vec<&str> = command.args.iter().map(String::as_str).collect();
+    args.push("--locked");
+    args.extend(extra);
+    run(&root(), "cargo", &args)?;
+    if !command.library.is_file() {
+        return Err(format!(
+            "the README's `cargo {}` gave no {}",
+            command.args.join(" "),
+            command.library.display()
+        ));
+    }
+    Ok(command.library.clone())
+}
+
+/// The README's C example, as it stands (its one ```` ```c ```` block in
+/// "From C"): compiled with `gcc -std=c99 -Wall -Wextra -Werror -pedantic
+/// -c`, linked with the host library of the README's host command and the
+/// simulated driver `mag-cal-ffi/c/readme_sensor.c`, and run: it must
+/// calibrate and print the heading of its last reading within 1 deg of the
+/// true one (which the driver prints at exit).
+fn readme_c_example() -> Result<(), String> {
     let root = root();
     let c_dir = root.join("target").join("c");
     std::fs::create_dir_all(&c_dir).map_err(|e| e.to_string())?;
-    let lib = root.join("target/thumbv7em-none-eabihf/c-m4/libmag_cal_ffi.a");
+    let blocks = fenced_blocks(&readme_from_c()?, "c");
+    let [example] = blocks.as_slice() else {
+        return Err(format!(
+            "README.md, From C: {} c blocks, not one",
+            blocks.len()
+        ));
+    };
+    let source = c_dir.join("readme_example.c");
+    std::fs::write(&source, example).map_err(|e| format!("{}: {e}", source.display()))?;
+    let include = format!("-I{}", path_str(&root.join("mag-cal-ffi/include"))?);
+    let object = c_dir.join("readme_example.o");
+    let strict = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"];
+    let mut args = strict.to_vec();
+    args.extend([
+        include.as_str(),
+        "-c",
+        path_str(&source)?,
+        "-o",
+        path_str(&object)?,
+    ]);
+    run(&root, "gcc", &args)?;
+
+    let (_, host) = readme_library_commands()?;
+    let library = build_readme_library(&host, &[])?;
+    let sensor = root.join("mag-cal-ffi/c/readme_sensor.c");
+    let program = c_dir.join("readme_example");
+    let mut args = strict.to_vec();
+    args.extend([
+        "-O2",
+        path_str(&object)?,
+        path_str(&sensor)?,
+        path_str(&library)?,
+        "-lm",
+        "-Wl,--gc-sections",
+        "-o",
+        path_str(&program)?,
+    ]);
+    run(&root, "gcc", &args)?;
+    let out = output(&root, "timeout", &["60", path_str(&program)?])?;
+    let out = String::from_utf8_lossy(&out);
+    print!("{out}");
+    let degrees = |line: &str| -> Option<f64> {
+        let (_, rest) = line.rsplit_once("heading ")?;
+        rest.strip_suffix(" deg")?.trim().parse().ok()
+    };
+    let truth = out.lines().find_map(|l| degrees(l.strip_prefix("true ")?));
+    let shown = out
+        .lines()
+        .filter(|l| !l.starts_with("true "))
+        .find_map(degrees);
+    let (Some(truth), Some(shown)) = (truth, shown) else {
+        return Err(format!("the README's C example printed no heading: {out}"));
+    };
+    let error = (shown - truth + 540.0).rem_euclid(360.0) - 180.0;
+    if error.abs() > 1.0 {
+        return Err(format!(
+            "the README's C example: heading {shown} deg, true {truth} deg ({error:+.1} deg)"
+        ));
+    }
+    println!("the README's C example: heading {shown} deg, true {truth} deg ({error:+.1} deg)");
+    Ok(())
+}
+
+/// Footprint of the C API on the Cortex-M4F, of the library the README's
+/// target command builds (`mag-cal-ffi/c/cortex-m/footprint.c`): flash of
+/// the program with one `magcal_calibrate_i16` call over the same program
+/// without it (Berkeley `text`), and the stack high-water mark of the call
+/// (n = 1000, `float`) over the baseline's, for the library with every
+/// method (the README's command) and with LS9 + ADC2 alone (the same
+/// command with `--no-default-features --features panic-handler`).
+/// Prints `FOOTPRINT-C <build> flash=<bytes> stack=<bytes>` and returns
+/// the figures of `all-methods`, then `ls9+adc2`.
+fn c_footprint() -> Result<[Footprint; 2], String> {
+    let root = root();
+    let c_dir = root.join("target").join("c");
+    std::fs::create_dir_all(&c_dir).map_err(|e| e.to_string())?;
+    let (target, _) = readme_library_commands()?;
     let cortex = root.join("mag-cal-ffi/c/cortex-m");
     let include = format!("-I{}", path_str(&root.join("mag-cal-ffi/include"))?);
     let (script, startup, source) = (
@@ -602,21 +799,9 @@ fn c_footprint() -> Result<(), String> {
         cortex.join("startup.c"),
         cortex.join("footprint.c"),
     );
-    let mut text = Vec::new();
-    // The baseline links the library with every method but calls nothing.
-    let every: &[&str] = &["--features", "panic-handler,all-methods"];
-    for (name, features, baseline) in [
-        ("baseline", every, true),
-        (
-            "ls9+adc2",
-            &["--no-default-features", "--features", "panic-handler"][..],
-            false,
-        ),
-        ("all-methods", every, false),
-    ] {
-        let mut cargo = vec!["--profile", "c-m4", "--target", "thumbv7em-none-eabihf"];
-        cargo.extend(features);
-        ffi_libraries("staticlib", &cargo)?;
+    // The program with (or without, `baseline`) the call, linked against
+    // `lib`: its flash and stack.
+    let measure = |name: &str, lib: &Path, baseline: bool| -> Result<Footprint, String> {
         let elf = c_dir.join(format!("footprint-{name}.elf"));
         let mut args = vec![
             "-std=c99",
@@ -634,7 +819,7 @@ fn c_footprint() -> Result<(), String> {
             include.as_str(),
             path_str(&startup)?,
             path_str(&source)?,
-            path_str(&lib)?,
+            path_str(lib)?,
             "-lm",
             "-o",
             path_str(&elf)?,
@@ -664,16 +849,106 @@ fn c_footprint() -> Result<(), String> {
             .find_map(|w| w.strip_prefix("stack="))
             .and_then(|v| v.parse().ok())
             .ok_or_else(|| format!("footprint.c printed no stack figure: {log}"))?;
-        text.push((name, flash, stack));
+        Ok(Footprint { flash, stack })
+    };
+    // LS9 + ADC2 first, so that the library left in place is the one the
+    // README's command gives.
+    let lib = build_readme_library(
+        &target,
+        &["--no-default-features", "--features", "panic-handler"],
+    )?;
+    let ls9 = measure("ls9+adc2", &lib, false)?;
+    let lib = build_readme_library(&target, &[])?;
+    let base = measure("baseline", &lib, true)?;
+    let every = measure("all-methods", &lib, false)?;
+    let over = |f: Footprint| Footprint {
+        flash: f.flash.saturating_sub(base.flash),
+        stack: f.stack.saturating_sub(base.stack),
+    };
+    let figures = [over(every), over(ls9)];
+    for (name, f) in ["all-methods", "ls9+adc2"].iter().zip(&figures) {
+        println!("FOOTPRINT-C {name} flash={} stack={}", f.flash, f.stack);
     }
-    let (_, base_flash, base_stack) = text[0];
-    for (name, flash, stack) in &text[1..] {
-        println!(
-            "FOOTPRINT-C {name} flash={} stack={}",
-            flash - base_flash,
-            stack - base_stack
-        );
+    Ok(figures)
+}
+
+/// Flash and stack of one `magcal_calibrate_i16` call, bytes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Footprint {
+    flash: u64,
+    stack: u64,
+}
+
+/// The README's footprint figures (its "From C" section): the first four
+/// `N B of flash` / `N B of stack` (digits grouped by spaces), in this
+/// order: flash and stack of the default build, then of LS9 + ADC2 alone.
+fn readme_footprint() -> Result<[Footprint; 2], String> {
+    footprint_figures(&readme_from_c()?)
+}
+
+/// [`readme_footprint`] of the text `section`.
+fn footprint_figures(section: &str) -> Result<[Footprint; 2], String> {
+    let text = section.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut figures = Vec::new();
+    for (at, _) in text.match_indices(" B of ") {
+        let rest = &text[at + " B of ".len()..];
+        let kind = &rest[..rest
+            .find(|c: char| !c.is_ascii_alphabetic())
+            .unwrap_or(rest.len())];
+        if kind != "flash" && kind != "stack" {
+            continue;
+        }
+        // The number before: digits in groups separated by single spaces.
+        let digits: String = text[..at]
+            .rsplit(' ')
+            .take_while(|w| !w.is_empty() && w.bytes().all(|b| b.is_ascii_digit()))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
+        let value: u64 = digits
+            .parse()
+            .map_err(|_| format!("README.md, From C: no number before `B of {kind}`"))?;
+        figures.push((kind.to_owned(), value));
     }
+    match figures.as_slice() {
+        [(a, fa), (b, sa), (c, fb), (d, sb), ..]
+            if [a, b, c, d] == ["flash", "stack", "flash", "stack"] =>
+        {
+            Ok([
+                Footprint { flash: *fa, stack: *sa },
+                Footprint { flash: *fb, stack: *sb },
+            ])
+        }
+        _ => Err(format!(
+            "README.md, From C: expected `N B of flash ... N B of stack` for the default build, then for LS9 + ADC2; found {figures:?}"
+        )),
+    }
+}
+
+/// [`c_footprint`], then the README's figures against it: each within
+/// 5 % of the measured one, or the run fails.
+fn c_footprint_checked() -> Result<(), String> {
+    let measured = c_footprint()?;
+    let stated = readme_footprint()?;
+    let mut wrong = Vec::new();
+    for ((name, m), s) in ["all-methods", "ls9+adc2"].iter().zip(measured).zip(stated) {
+        for (what, m, s) in [("flash", m.flash, s.flash), ("stack", m.stack, s.stack)] {
+            let off = (m as f64 - s as f64) / s as f64 * 100.0;
+            let line = format!("{name} {what}: README {s} B, measured {m} B ({off:+.1} %)");
+            println!("{line}");
+            if off.abs() > 5.0 {
+                wrong.push(line);
+            }
+        }
+    }
+    if !wrong.is_empty() {
+        return Err(format!(
+            "the README's C footprint (From C) is more than 5 % off; state the measured figures: {}",
+            wrong.join("; ")
+        ));
+    }
+    println!("the README's C footprint figures hold (within 5 %)");
     Ok(())
 }
 
@@ -761,9 +1036,45 @@ fn bench(args: &[String]) -> Result<(), String> {
         bench_args.push("--verify");
     }
     run(&firmware_dir(), "bash", &bench_args)?;
-    c_footprint()?;
+    c_footprint_checked()?;
     if host {
         run(&root(), "cargo", &["bench", "--locked", "-p", "benches"])?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_footprint_figures_are_read_from_the_sentence() {
+        let text = "one call adds 68 536 B of flash to a C program and needs\n4 144 B of stack. \
+                    LS9 + ADC2 alone: 49 752 B of flash and 4 128 B of stack (`cargo xtask`).";
+        assert_eq!(
+            footprint_figures(text),
+            Ok([
+                Footprint {
+                    flash: 68_536,
+                    stack: 4_144
+                },
+                Footprint {
+                    flash: 49_752,
+                    stack: 4_128
+                },
+            ])
+        );
+        // A figure missing or out of order is an error, not a guess.
+        assert!(footprint_figures("adds 68 536 B of flash and 49 752 B of flash").is_err());
+        assert!(
+            footprint_figures("adds B of flash, 4 B of stack, 5 B of flash, 6 B of stack").is_err()
+        );
+    }
+
+    #[test]
+    fn code_blocks_are_found_by_language() {
+        let text = "x\n```sh\ncargo a\n# -> t\n```\n```c\nint x;\n```\n```sh\nb\n```\n";
+        assert_eq!(fenced_blocks(text, "sh"), ["cargo a\n# -> t\n", "b\n"]);
+        assert_eq!(fenced_blocks(text, "c"), ["int x;\n"]);
+    }
 }
