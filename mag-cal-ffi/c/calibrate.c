@@ -152,7 +152,7 @@ int main(int argc, char **argv) {
         magcal_apply(cal, y, u);
         if (magcal_apply_i16(cal, samples[i], v) != MAGCAL_STATUS_OK ||
             memcmp(u, v, sizeof u) != 0) {
-            printf("reading %u: magcal_apply_i16 [%.9g, %.9g, %.9g], magcal_apply [%.9g, %.9g, %.9g]\n",
+            printf("reading %u: apply_i16 [%.9g, %.9g, %.9g], apply [%.9g, %.9g, %.9g]\n",
                    (unsigned)i, v[0], v[1], v[2], u[0], u[1], u[2]);
             failed = 1;
         }

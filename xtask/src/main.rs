@@ -8,7 +8,8 @@
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
 //! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run, the page's browser tests (`web-test`) and the no-panic link proof (`no-panic-check/check.sh`) |
 //! | `header` | regenerate the C header `mag-cal-ffi/include/mag_cal.h` with cbindgen |
-//! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU) |
+//! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU), the README's C example compiles as it stands and runs, and the README's C footprint figures hold (`c-footprint`) |
+//! | `c-footprint` | setup, then flash and stack of one `magcal_calibrate_i16` call on the Cortex-M4F, with the library the README's target command builds (`FOOTPRINT-C` lines), checked against the README's figures (within 5 %) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
 //! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //! | `web` | setup, then build the calibration page (`mag-cal-web`: the wasm, `npm ci`, the page assembled in `target/web`) and serve it on `http://127.0.0.1:8080/` (or the port given) |
@@ -48,7 +49,7 @@ fn main() {
         Some("web") => setup().and_then(|()| web(&args[1..])),
         Some("web-test") => setup().and_then(|()| web_tests()),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|bench [--verify] [--host]|web [PORT]|web-test>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|c-footprint|bench [--verify] [--host]|web [PORT]|web-test>");
             exit(2);
         }
     };
