@@ -331,7 +331,12 @@ fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32
         refits: Refits {
             run: log.refits.adopted
                 + log.refits.kept
-                + log.refits.refused.iter().map(|r| r.count as u32).sum::<u32>(),
+                + log
+                    .refits
+                    .refused
+                    .iter()
+                    .map(|r| r.count as u32)
+                    .sum::<u32>(),
             ..log.refits
         },
         offsets_only: log.offsets,
@@ -640,7 +645,11 @@ fn adoption(a: &Adoption) -> String {
         if a.after_end { " (after the end)" } else { "" },
         a.kind
     );
-    match (a.hard_iron_change, a.hard_iron_change_of_field, a.field_strength_change) {
+    match (
+        a.hard_iron_change,
+        a.hard_iron_change_of_field,
+        a.field_strength_change,
+    ) {
         (Some(d), Some(rel), Some(field)) => {
             let _ = write!(
                 s,

@@ -104,8 +104,7 @@ pub fn calibration(p: &Parameters, q: &Quality) -> String {
     let warnings = if q.warnings.is_empty() {
         "none".to_owned()
     } else {
-        q
-            .warnings
+        q.warnings
             .iter()
             .map(
                 |name| match Warning::ALL.into_iter().find(|w| w.name() == *name) {
