@@ -715,3 +715,82 @@ fn row_list(rows: &[usize], n: usize) -> String {
     let word = if n == 1 { "row" } else { "rows" };
     format!("({word} {}{more})", named.join(", "))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A device turned slowly through most orientations (the core's
+    /// example): hard iron (250, -80, 40), axes 300, 330, 280.
+    fn turning(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|k| {
+                let z = (k as f64 * 0.0021).sin();
+                let r = (1.0 - z * z).sqrt();
+                let phi = k as f64 * 0.05;
+                [
+                    250.0 + 300.0 * r * phi.cos(),
+                    -80.0 + 330.0 * r * phi.sin(),
+                    40.0 + 280.0 * z,
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn replays_a_simulated_device_to_its_calibration() {
+        let rho = (300.0f64 * 330.0 * 280.0).cbrt();
+        for precision in [Precision::F32, Precision::F64] {
+            for steps in [1, 4] {
+                let r = replay(&turning(6000), precision, steps);
+                let fin = r.final_calibration.as_ref().expect("calibrated");
+                let b = fin.parameters.hard_iron;
+                let db =
+                    ((b[0] - 250.0).powi(2) + (b[1] + 80.0).powi(2) + (b[2] - 40.0).powi(2)).sqrt();
+                assert!(db < 1e-3 * rho, "{precision:?} {steps}: b {b:?}");
+                assert!((fin.parameters.field_strength / rho - 1.0).abs() < 1e-3);
+                assert_eq!(r.first_calibration, r.adoptions.first().map(|a| a.row));
+                assert_eq!(r.refits.adopted as usize, r.adoptions.len());
+                assert!(r.reason.is_none() && r.stale_from.is_empty());
+                assert_eq!(r.readings.stored + r.readings.too_close, 6000);
+            }
+        }
+    }
+
+    #[test]
+    fn integer_counts_are_pushed_as_such_and_glitches_named() {
+        // i16 counts: a component on the rails is a glitch, as in `fit`.
+        let mut rows: Vec<[f64; 3]> = turning(3000).iter().map(|r| r.map(f64::round)).collect();
+        rows[7] = [32767.0, 1.0, 2.0];
+        rows[9] = [0.0, 0.0, 0.0];
+        let r = replay(&rows, Precision::F32, 1);
+        assert_eq!(
+            (r.readings.invalid, &r.readings.invalid_rows[..]),
+            (2, &[7, 9][..])
+        );
+        // In a file of floats, 32767 is no glitch (the rails rule is for
+        // integer counts).
+        rows[100] = [0.5, 0.0, 0.0];
+        let r = replay(&rows, Precision::F32, 1);
+        assert_eq!(r.readings.invalid_rows, vec![9]);
+    }
+
+    #[test]
+    fn refusals_are_grouped_by_kind() {
+        let mut refused = Vec::new();
+        count(&mut refused, Error::Planar, 10);
+        count(&mut refused, Error::PoorCoverage, 20);
+        count(&mut refused, Error::Planar, 30);
+        assert_eq!(refused.len(), 2);
+        assert_eq!(
+            (refused[0].count, refused[0].first_row, refused[0].last_row),
+            (2, 10, 30)
+        );
+        let readings = Readings::default();
+        let reason = not_calibrated(&refused, &readings, 0, 0);
+        assert!(
+            reason.starts_with("3 refits refused, the last at row 30: samples lie near a plane"),
+            "{reason}"
+        );
+    }
+}
