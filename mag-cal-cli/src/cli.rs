@@ -85,6 +85,8 @@ pub enum Command {
     Offsets(OffsetsArgs),
     /// Fit a heading-only calibration to turns about one axis (a car, a boat)
     Planar(PlanarArgs),
+    /// Replay a log through the core's background calibrator, as firmware runs it
+    Background(BackgroundArgs),
 }
 
 /// Options of `magcal fit`.
@@ -226,6 +228,59 @@ pub struct PlanarArgs {
     /// Floating-point precision of the fit
     #[arg(long, value_enum, default_value_t = Precision::F64)]
     pub precision: Precision,
+
+    /// Output format
+    #[arg(long, value_enum, default_value_t = Format::Text)]
+    pub format: Format,
+
+    /// Magnetometer columns by header name
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
+    pub columns: Option<Columns>,
+}
+
+/// Text after the help of `magcal background`.
+const BACKGROUND_AFTER_HELP: &str = "\
+Replays FILE (read as by 'magcal fit') row by row through the core's
+background calibrator (mag_cal_core::background::Background, 48 direction
+cells of 6 samples, default configuration), as firmware drives it: push each
+reading, then one step (at most 32 buffered samples of work), as the
+firmware example does. The refit under way after the last row is finished
+(the steps of the readings that would follow). Rows are numbered from 0 in
+file order, as 'magcal apply --flags' counts them.
+
+Output: the row at which it first calibrated, each adoption (row, refit or
+offsets-only re-estimate after a hard-iron change, the change of b and of the
+field strength, its figures), the refits refused and why, the readings not
+buffered (glitches, wild readings), and the final calibration as 'magcal fit'
+prints it. --format json: one object with 'adoptions' (each with its 'row')
+and 'final' (the fields of 'magcal fit --format json' that 'magcal apply'
+reads: hard_iron, soft_iron, field_strength, quality, precision).
+
+Exit status: 0 success, 2 usage, I/O or parse error, 3 no calibration adopted
+(the report is printed, 'final' is null and 'reason' says why).";
+
+/// Options of `magcal background`.
+#[derive(Debug, Args)]
+#[command(after_help = BACKGROUND_AFTER_HELP)]
+pub struct BackgroundArgs {
+    /// Raw samples in the order they were read ('-' for stdin)
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+
+    /// Floating-point precision of the calibrator (f32 as on a
+    /// microcontroller's FPU)
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+
+    /// Calls of step after each push (1 as the firmware example: at most 32
+    /// buffered samples of work a reading)
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 1,
+        value_parser = clap::value_parser!(u32).range(1..=1000)
+    )]
+    pub steps: u32,
 
     /// Output format
     #[arg(long, value_enum, default_value_t = Format::Text)]

@@ -44,13 +44,16 @@ pub enum CliError {
     },
     /// The core refused to calibrate.
     Refused(mag_cal_core::Error),
+    /// A replay through the background calibrator ended without a
+    /// calibration (`magcal background`): why, with the core's reason.
+    NotCalibrated(String),
 }
 
 impl CliError {
     /// The process exit code for this error.
     pub fn exit_code(&self) -> i32 {
         match self {
-            CliError::Refused(_) => i32::from(EXIT_REFUSED),
+            CliError::Refused(_) | CliError::NotCalibrated(_) => i32::from(EXIT_REFUSED),
             _ => i32::from(EXIT_USAGE),
         }
     }
@@ -78,6 +81,7 @@ impl fmt::Display for CliError {
                 "calibration refused: {err} (a device that turns about one axis only: 'magcal planar')"
             ),
             CliError::Refused(err) => write!(f, "calibration refused: {err}"),
+            CliError::NotCalibrated(reason) => write!(f, "no calibration: {reason}"),
         }
     }
 }
@@ -89,7 +93,7 @@ impl std::error::Error for CliError {
                 Some(err)
             }
             CliError::Refused(err) => Some(err),
-            CliError::Parse { .. } | CliError::Input(_) => None,
+            CliError::Parse { .. } | CliError::Input(_) | CliError::NotCalibrated(_) => None,
         }
     }
 }

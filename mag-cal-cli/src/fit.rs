@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use mag_cal_core::{calibrate, Calibration, Config, Method, Real, SampleClass};
+use mag_cal_core::{calibrate, Calibration, Config, Method, Real, SampleClass, Warnings};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
@@ -111,6 +111,59 @@ pub struct Quality {
     pub skewness: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
+}
+
+impl Quality {
+    /// The figures of the core's `quality` with the calibration's radial RMS
+    /// and norm spread (over the rows it used) and its warnings: the
+    /// `quality` object of `fit`'s JSON, also `magcal background`'s.
+    pub fn from_core<T: Real>(
+        quality: &mag_cal_core::Quality<T>,
+        radial_rms: T,
+        norm_spread: f64,
+        warnings: Warnings,
+    ) -> Self {
+        Quality {
+            radial_rms: radial_rms.to_f64(),
+            norm_spread,
+            flatness: quality.flatness.to_f64(),
+            quadric_gap: quality.quadric_gap.to_f64(),
+            distortion: quality.distortion.to_f64(),
+            coverage: quality.coverage.to_f64(),
+            gram_condition: quality.gram_condition.to_f64(),
+            fit_error: quality.fit_error.to_f64(),
+            lack_of_fit: quality.lack_of_fit.to_f64(),
+            outlier_share: quality.outlier_share.to_f64(),
+            skewness: quality.skewness.to_f64(),
+            warnings: warnings.iter().map(|w| w.name()).collect(),
+        }
+    }
+}
+
+/// A calibration's parameters widened to `f64`, as `fit`'s JSON names them
+/// (`hard_iron`, `soft_iron` by rows, `field_strength`): what `magcal
+/// apply` reads.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Parameters {
+    /// Hard-iron offset `b`, sensor units.
+    pub hard_iron: [f64; 3],
+    /// Soft-iron matrix `W`, rows; symmetric.
+    pub soft_iron: [[f64; 3]; 3],
+    /// Local field strength `det(W)^(-1/3)`, sensor units.
+    pub field_strength: f64,
+}
+
+impl Parameters {
+    /// The parameters of `cal`.
+    pub fn of<T: Real>(cal: &Calibration<T>) -> Self {
+        let b = cal.hard_iron_vector();
+        let w = cal.soft_iron_matrix();
+        Parameters {
+            hard_iron: [b.x, b.y, b.z].map(T::to_f64),
+            soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
+            field_strength: cal.field_strength().to_f64(),
+        }
+    }
 }
 
 /// Runs `magcal fit`, writing the report to `out`.
@@ -233,8 +286,6 @@ fn fit_in<T: Real>(
     let fit = fit?;
 
     let cal = &fit.calibration;
-    let b = cal.hard_iron_vector();
-    let w = cal.soft_iron_matrix();
     let report = &fit.report;
     // What the fit did with each row, in precision `T` as the core decided.
     let classes: Vec<SampleClass> = match &ints {
@@ -247,6 +298,11 @@ fn fit_in<T: Real>(
         .zip(&classes)
         .filter(|(_, c)| **c == SampleClass::Used)
         .map(|(s, _)| cal.apply_vector(*s).norm().to_f64());
+    let Parameters {
+        hard_iron,
+        soft_iron,
+        field_strength,
+    } = Parameters::of(cal);
     Ok(Outcome {
         method: report.method.name(),
         ls: report.ls.name(),
@@ -258,28 +314,20 @@ fn fit_in<T: Real>(
         screened: report.screened,
         rejected: report.rejected,
         beside_runs: report.beside_runs,
-        hard_iron: [b.x, b.y, b.z].map(T::to_f64),
-        soft_iron: [0, 1, 2].map(|r| [0, 1, 2].map(|c| w[(r, c)].to_f64())),
-        field_strength: cal.field_strength().to_f64(),
+        hard_iron,
+        soft_iron,
+        field_strength,
         iterations: report.iterations,
         passes: report.passes,
         robust_passes: report.robust_passes,
         start_window: report.start_window(),
         timing_us: elapsed_us,
-        quality: Quality {
-            radial_rms: report.radial_rms.to_f64(),
-            norm_spread: spread(norms),
-            flatness: report.quality.flatness.to_f64(),
-            quadric_gap: report.quality.quadric_gap.to_f64(),
-            distortion: report.quality.distortion.to_f64(),
-            coverage: report.quality.coverage.to_f64(),
-            gram_condition: report.quality.gram_condition.to_f64(),
-            fit_error: report.quality.fit_error.to_f64(),
-            lack_of_fit: report.quality.lack_of_fit.to_f64(),
-            outlier_share: report.quality.outlier_share.to_f64(),
-            skewness: report.quality.skewness.to_f64(),
-            warnings: report.warnings.iter().map(|w| w.name()).collect(),
-        },
+        quality: Quality::from_core(
+            &report.quality,
+            report.radial_rms,
+            spread(norms),
+            report.warnings,
+        ),
         selection: SelectionJson::from_core(&report.selection),
         classes,
     })
@@ -302,7 +350,7 @@ pub fn counts(samples: &[[f64; 3]]) -> Option<Vec<[i16; 3]>> {
 }
 
 /// Population standard deviation over mean of `values` (NaN when empty).
-fn spread(values: impl Iterator<Item = f64> + Clone) -> f64 {
+pub fn spread(values: impl Iterator<Item = f64> + Clone) -> f64 {
     let (n, sum) = values
         .clone()
         .fold((0usize, 0.0), |(n, s), v| (n + 1, s + v));

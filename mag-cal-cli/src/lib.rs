@@ -17,6 +17,7 @@
 //! | [`apply`] | the `apply` subcommand: calibrated samples, headings and row flags as CSV |
 //! | [`error`] | the error type and its exit codes |
 //! | [`offsets`], [`planar`] | the `offsets` and `planar` subcommands |
+//! | [`background`] | the `background` subcommand: a log replayed through the core's background calibrator |
 //!
 //! Exit codes: 0 success, 2 usage, I/O or parse error, 3 calibration refused
 //! by the core. Every failure prints one line on stderr naming the reason
@@ -29,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod apply;
+pub mod background;
 pub mod cli;
 pub mod error;
 pub mod fit;

@@ -7,7 +7,7 @@ use clap::Parser;
 
 use mag_cal_cli::cli::{Cli, Command};
 use mag_cal_cli::error::{self, CliError};
-use mag_cal_cli::{apply, fit, offsets, planar};
+use mag_cal_cli::{apply, background, fit, offsets, planar};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -42,6 +42,7 @@ fn run(cli: Cli) -> Result<Vec<String>, CliError> {
         Command::Apply(args) => apply::run(&args, &mut std::io::stdout().lock()),
         Command::Offsets(args) => offsets::run(&args, &mut std::io::stdout().lock()),
         Command::Planar(args) => planar::run(&args, &mut std::io::stdout().lock()),
+        Command::Background(args) => background::run(&args, &mut std::io::stdout().lock()),
     }
 }
 

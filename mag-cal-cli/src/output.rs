@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 
 use mag_cal_core::Warning;
 
-use crate::fit::Outcome;
+use crate::fit::{Outcome, Parameters, Quality};
 
 /// Significant digits of the numbers in the text report.
 const DIGITS: usize = 7;
@@ -48,43 +48,63 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str, skipped: Option<&str>
     );
     let _ = writeln!(s, "  fit time      {:.0} us", o.timing_us);
     let _ = writeln!(s);
-    let (b, scale) = block(&[o.hard_iron]);
+    s.push_str(&calibration(
+        &Parameters {
+            hard_iron: o.hard_iron,
+            soft_iron: o.soft_iron,
+            field_strength: o.field_strength,
+        },
+        &o.quality,
+    ));
+    let _ = writeln!(s);
+    let _ = writeln!(
+        s,
+        "apply: calibrated = W (raw - b)  (unit sphere; times the field strength for sensor units)"
+    );
+    s
+}
+
+/// The calibration block of `fit`'s text report (also `magcal
+/// background`'s): `b`, `W`, the field strength and the quality figures,
+/// one line each, ending with the warnings line.
+pub fn calibration(p: &Parameters, q: &Quality) -> String {
+    let mut s = String::new();
+    let (b, scale) = block(&[p.hard_iron]);
     let _ = writeln!(s, "hard iron b (sensor units){scale}");
     let _ = writeln!(s, "{b}");
-    let (w, scale) = block(&o.soft_iron);
+    let (w, scale) = block(&p.soft_iron);
     let _ = writeln!(s, "soft iron W (symmetric, 1 / sensor unit){scale}");
     let _ = writeln!(s, "{w}");
     let _ = writeln!(
         s,
         "field strength  {} (sensor units)",
-        sig(o.field_strength, DIGITS)
+        sig(p.field_strength, DIGITS)
     );
     let _ = writeln!(s);
     let _ = writeln!(s, "quality");
     let _ = writeln!(
         s,
         "  radial RMS    {}  (RMS of |W (raw - b)| - 1)",
-        sig(o.quality.radial_rms, 4)
+        sig(q.radial_rms, 4)
     );
     let _ = writeln!(
         s,
         "  norm spread   {}  (std / mean of |W (raw - b)|)",
-        sig(o.quality.norm_spread, 4)
+        sig(q.norm_spread, 4)
     );
     let _ = writeln!(
         s,
         "  fit error     {} of the field, lack of fit {}, outlier share {} %, skewness {}",
-        sig(o.quality.fit_error, 3),
-        sig(o.quality.lack_of_fit, 2),
-        sig(100.0 * o.quality.outlier_share, 2),
-        sig(o.quality.skewness, 2)
+        sig(q.fit_error, 3),
+        sig(q.lack_of_fit, 2),
+        sig(100.0 * q.outlier_share, 2),
+        sig(q.skewness, 2)
     );
     // One line a warning: its name and the core's sentence for people.
-    let warnings = if o.quality.warnings.is_empty() {
+    let warnings = if q.warnings.is_empty() {
         "none".to_owned()
     } else {
-        o.quality
-            .warnings
+        q.warnings
             .iter()
             .map(
                 |name| match Warning::ALL.into_iter().find(|w| w.name() == *name) {
@@ -95,18 +115,12 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str, skipped: Option<&str>
             .collect::<Vec<_>>()
             .join("\n                ")
     };
-    let q = &o.quality;
     let _ = writeln!(
         s,
         "  geometry      flatness {:.3}, quadric gap {:.3e}, distortion {:.2}, coverage {:.3}, Gram condition {:.1}",
         q.flatness, q.quadric_gap, q.distortion, q.coverage, q.gram_condition
     );
     let _ = writeln!(s, "  warnings      {warnings}");
-    let _ = writeln!(s);
-    let _ = writeln!(
-        s,
-        "apply: calibrated = W (raw - b)  (unit sphere; times the field strength for sensor units)"
-    );
     s
 }
 

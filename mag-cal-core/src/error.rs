@@ -210,7 +210,7 @@ impl fmt::Display for Error {
             ),
             Error::SystematicMisfit { lack_of_fit, limit } => write!(
                 f,
-                "the ellipsoid misfits a region of the samples (lack of fit {lack_of_fit:.1}, limit {limit:.1}): \
+                "the ellipsoid misfits a region of the samples (lack of fit {lack_of_fit:.4} of the field, limit {limit:.3}): \
                  a disturbance moved part of the trajectory; collect again away from magnets and currents"
             ),
             Error::Truncated => f.write_str("stored calibration is truncated"),
