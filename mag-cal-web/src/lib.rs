@@ -827,6 +827,26 @@ mod tests {
         assert_eq!(code, 2);
     }
 
+    /// A board turning level over the serial port: the 3-D fit refuses it
+    /// as planar and offers the planar fit, which fits what the collector
+    /// kept.
+    #[test]
+    fn a_live_level_turn_fits_as_planar() {
+        let mut live = Live::default();
+        feed(&mut live, &level_turn(600));
+        let (code, text) = live.fit(b"", &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((code, doc["offer"].as_str()), (3, Some("planar")), "{text}");
+        let (code, text) = live.fit(br#"{"mode":"planar"}"#, &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        let kept = live.progress_json()["samples"].as_u64().unwrap();
+        assert_eq!(doc["norms"].as_array().map(Vec::len), Some(kept as usize));
+        let centre = &doc["fit"]["centre"];
+        assert!((centre[0].as_f64().unwrap() - 40.0).abs() < 2.0, "{centre}");
+        assert!((centre[1].as_f64().unwrap() + 25.0).abs() < 2.0, "{centre}");
+    }
+
     /// The exports as the page calls them: copy in, call, read out, free.
     #[test]
     fn the_exports_move_bytes_in_and_out() {

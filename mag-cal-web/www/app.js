@@ -428,7 +428,8 @@ function showResult(doc, name) {
   if (doc.mode === 'planar') showPlanar(doc);
   else show3d(doc);
   const what = doc.mode === 'planar' ? 'Calibrated as planar (heading only)' : 'Calibrated';
-  setStatus(state.source === 'serial' ? `${what} from the board: keep turning to refine.` : `${what}.`, 'good');
+  const then = doc.packet ? 'keep turning to refine, or send it' : 'keep turning to refine';
+  setStatus(state.source === 'serial' ? `${what} from the board: ${then}.` : `${what}.`, 'good');
 }
 
 function show3d(doc) {
