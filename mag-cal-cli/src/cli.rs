@@ -341,7 +341,7 @@ impl AxisArg {
 }
 
 /// `--align ROW:DEG`.
-fn parse_align(s: &str) -> Result<(usize, f64), String> {
+pub fn parse_align(s: &str) -> Result<(usize, f64), String> {
     let (row, deg) = s
         .split_once(':')
         .ok_or_else(|| format!("expected ROW:DEG, e.g. 0:90, got '{s}'"))?;

@@ -18,18 +18,7 @@ use crate::selection::DropCounts;
 pub fn run(args: &PlanarArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError> {
     let source = Source::from_arg(&args.file);
     let table = input::parse(&source.read()?, args.columns.as_ref(), &source.name())?;
-    let config = PlanarConfig::with_up(args.up.vector());
-    let text = match args.precision {
-        Precision::F64 => {
-            let fit = calibrate_planar::<f64, _>(&table.samples, &config);
-            render(fit.map_err(CliError::Refused)?, args, &table, &source)?
-        }
-        Precision::F32 => {
-            let rows: Vec<[f32; 3]> = table.samples.iter().map(|s| s.map(|v| v as f32)).collect();
-            let fit = calibrate_planar::<f32, _>(&rows, &config);
-            render(fit.map_err(CliError::Refused)?, args, &table, &source)?
-        }
-    };
+    let text = outputs(&table, &source.name(), args, &[args.format])?.concat();
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
     // As `magcal fit`: where the text does not say which columns were read;
     // and the lines that were no samples.
@@ -42,12 +31,45 @@ pub fn run(args: &PlanarArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErr
     )
 }
 
+/// What `magcal planar` prints for samples already read, in each of
+/// `formats`, from one fit (`args.format` and `args.file` are not read;
+/// `name` names the input in the text). The page (`mag-cal-web`) shows the
+/// text and saves the JSON.
+pub fn outputs(
+    table: &input::Table,
+    name: &str,
+    args: &PlanarArgs,
+    formats: &[Format],
+) -> Result<Vec<String>, CliError> {
+    let config = PlanarConfig::with_up(args.up.vector());
+    match args.precision {
+        Precision::F64 => {
+            let fit = calibrate_planar::<f64, _>(&table.samples, &config);
+            let fit = fit.map_err(CliError::Refused)?;
+            formats
+                .iter()
+                .map(|&format| render(fit, args, format, table, name))
+                .collect()
+        }
+        Precision::F32 => {
+            let rows: Vec<[f32; 3]> = table.samples.iter().map(|s| s.map(|v| v as f32)).collect();
+            let fit = calibrate_planar::<f32, _>(&rows, &config);
+            let fit = fit.map_err(CliError::Refused)?;
+            formats
+                .iter()
+                .map(|&format| render(fit, args, format, table, name))
+                .collect()
+        }
+    }
+}
+
 /// The output of a fit in precision `T`, aligned as `--align` asks.
 fn render<T: Real>(
     fit: PlanarFit<T>,
     args: &PlanarArgs,
+    format: Format,
     table: &input::Table,
-    source: &Source,
+    name: &str,
 ) -> Result<String, CliError> {
     let mut cal = fit.calibration;
     if let Some((row, deg)) = args.align {
@@ -65,7 +87,7 @@ fn render<T: Real>(
     let r = fit.report;
     let f = |v: T| v.to_f64();
     let v3 = |v: [T; 3]| v.map(f);
-    let text = match args.format {
+    let text = match format {
         Format::Json => {
             let v = json!({
                 "method": "planar",
@@ -122,7 +144,7 @@ fn render<T: Real>(
                  fit error     {:.4} of the field in the plane\n  \
                  flatness      {:.4} (thickness {:.4} of the field in the plane)\n  \
                  coverage      {} of 12 sectors of 30 deg\n",
-                source.name(),
+                name,
                 table.columns,
                 f(r.axis_tilt_deg),
                 args.up.name(),
@@ -200,8 +222,9 @@ pub fn apply(
         .collect())
 }
 
-/// The calibration of a `magcal planar --format json` object.
-fn planar_from_value(value: &Value) -> Result<PlanarCalibration<f64>, String> {
+/// The calibration of a `magcal planar --format json` object, or what is
+/// wrong with it.
+pub fn planar_from_value(value: &Value) -> Result<PlanarCalibration<f64>, String> {
     let field = |key: &str| value.get(key).ok_or(format!("missing field '{key}'"));
     let row = |v: &Value| -> Option<[f64; 3]> {
         let a = v.as_array().filter(|a| a.len() == 3)?;

@@ -1,7 +1,7 @@
 //! The calibration page's WebAssembly: [`mag_cal_core`] with `magcal`'s
 //! parser, fit summary and reports ([`mag_cal_cli`]) behind a handful of
-//! plain exports, so that the page shows exactly what `magcal fit` prints
-//! and does no numerics of its own.
+//! plain exports, so that the page shows exactly what `magcal fit` (or
+//! `magcal planar`) prints and does no numerics of its own.
 //!
 //! # The interface
 //!
@@ -16,7 +16,7 @@
 //! | export | does | JSON written |
 //! |---|---|---|
 //! | [`mc_info`] | the core's method names and coverage grid | [`info_json`] |
-//! | [`mc_fit`] | parses a file and fits it | [`fit_json`] |
+//! | [`mc_fit`] | parses a file and fits it (3-D or planar) | [`fit_json`] |
 //! | [`mc_live_reset`] | empties the live collector | none |
 //! | [`mc_live_line`] | one line of a serial stream into the collector | [`Live::line`] |
 //! | [`mc_live_fit`] | fits the collector's samples | [`fit_json`] |
@@ -30,15 +30,18 @@ pub mod packet;
 pub mod snippets;
 
 use std::cell::RefCell;
+use std::path::PathBuf;
 
-use mag_cal_cli::cli::{parse_columns, Columns, Precision};
+use mag_cal_cli::cli::{
+    parse_align, parse_columns, AxisArg, Columns, Format, PlanarArgs, Precision,
+};
 use mag_cal_cli::error::CliError;
 use mag_cal_cli::fit::{fit_timed, Outcome};
-use mag_cal_cli::input::{self, ColumnsUsed, Picked};
-use mag_cal_cli::output;
+use mag_cal_cli::input::{self, ColumnsUsed, Picked, Table};
 use mag_cal_cli::selection::class_name;
+use mag_cal_cli::{output, planar};
 use mag_cal_core::collector::{Collector, Offer, Progress};
-use mag_cal_core::{Config, Method, SampleClass, Warning};
+use mag_cal_core::{Config, Error, Method, SampleClass, Warning};
 use serde_json::{json, Value};
 
 /// Capacity of the live collection (24 bytes a sample). MotionCal keeps
@@ -49,12 +52,34 @@ use serde_json::{json, Value};
 /// fifth).
 pub const LIVE_CAPACITY: usize = 4000;
 
+/// The fits the page runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// `magcal fit`: the three-dimensional calibration (`"3d"`).
+    Full,
+    /// `magcal planar`: a heading calibration from turns about one axis
+    /// (`"planar"`).
+    Planar,
+}
+
+/// The sensor axes `magcal planar --up` takes, by [`AxisArg::name`].
+const UP_AXES: [AxisArg; 6] = [
+    AxisArg::X,
+    AxisArg::MinusX,
+    AxisArg::Y,
+    AxisArg::MinusY,
+    AxisArg::Z,
+    AxisArg::MinusZ,
+];
+
 /// The options of a fit, as the page sends them (JSON object; every field
 /// optional).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
     /// The name of the file, for messages (`"name"`).
     pub name: String,
+    /// Which fit (`"mode"`: `"3d"`, the default, or `"planar"`).
+    pub mode: Mode,
     /// `"f32"` or `"f64"` (`"precision"`, default `f64`).
     pub precision: Precision,
     /// Outlier handling off (`"plain": true`), as `magcal fit --plain`.
@@ -63,6 +88,12 @@ pub struct Options {
     pub method: Method,
     /// Column names (`"columns": "x,y,z"`), as `magcal fit --columns`.
     pub columns: Option<Columns>,
+    /// The planar fit's up axis (`"up"`, default `-z`), as `magcal planar
+    /// --up`.
+    pub up: AxisArg,
+    /// The planar fit's heading 0 (`"align": "ROW:DEG"`), as `magcal
+    /// planar --align`.
+    pub align: Option<(usize, f64)>,
 }
 
 impl Options {
@@ -90,12 +121,35 @@ impl Options {
             None | Some("") => None,
             Some(text) => Some(parse_columns(text).map_err(|e| bad(&format!("columns: {e}")))?),
         };
+        let mode = match value["mode"].as_str().unwrap_or("3d") {
+            "3d" => Mode::Full,
+            "planar" => Mode::Planar,
+            other => return Err(bad(&format!("mode {other:?} is not 3d or planar"))),
+        };
+        let up_name = value["up"].as_str().unwrap_or("-z");
+        let up = UP_AXES
+            .into_iter()
+            .find(|a| a.name() == up_name)
+            .ok_or_else(|| {
+                bad(&format!(
+                    "up axis {up_name:?} is not one of x, -x, y, -y, z, -z"
+                ))
+            })?;
+        let align = match value["align"].as_str().map(str::trim) {
+            None | Some("") => None,
+            Some(text) => {
+                Some(parse_align(text).map_err(|e| bad(&format!("heading 0 at {text}: {e}")))?)
+            }
+        };
         Ok(Options {
             name,
+            mode,
             precision,
             plain: value["plain"].as_bool().unwrap_or(false),
             method,
             columns,
+            up,
+            align,
         })
     }
 
@@ -107,21 +161,37 @@ impl Options {
             ..Config::default()
         }
     }
+
+    /// `magcal planar`'s arguments for these options.
+    fn planar_args(&self) -> PlanarArgs {
+        PlanarArgs {
+            file: PathBuf::from(&self.name),
+            up: self.up,
+            align: self.align,
+            precision: self.precision,
+            format: Format::Json,
+            columns: None,
+        }
+    }
 }
 
-/// Parses `bytes` (any format `magcal fit` reads) and fits them; the JSON
-/// for the page and the exit code `magcal fit` would give (0, 2 or 3).
+/// Parses `bytes` (any format `magcal fit` reads) and fits them as the
+/// options' [`Mode`] asks; the JSON for the page and the exit code `magcal
+/// fit` (or `magcal planar`) would give (0, 2 or 3).
 ///
 /// The JSON: `status` (`"ok"`, `"refused"` or `"error"`), `code`, and
 /// - when the file parsed: `columns` (which columns, and why), `rows`,
 ///   `raw` (every row, `null` for a non-finite value) and `skipped` (the
 ///   lines that were no samples, one sentence, or `null`);
-/// - on success: `json` (the line `magcal fit --format json` prints, to
-///   save for `magcal apply`), `text` (its text report), `fit` (that JSON
-///   as an object), per row `classes`, `calibrated` (`W (y - b)`) and
-///   `norms`, `warnings` (`name` and the core's sentence, `text`),
-///   `snippets` (`c`, `rust`) and `packet` (MotionCal's 68 bytes);
-/// - otherwise `message`: the CLI's error line, without `magcal: `.
+/// - on success: `mode` (`"3d"` or `"planar"`), `json` (the line `magcal
+///   fit --format json` or `magcal planar --format json` prints, to save
+///   for `magcal apply`), `text` (its text report), `fit` (that JSON as an
+///   object), per row `calibrated` and `norms`, and `snippets` (`c`,
+///   `rust`); see [`success`] and [`planar_success`] for the rest;
+/// - otherwise `message`: the CLI's error line, without `magcal: `, with
+///   advice the page can follow ([`message`]), and `offer`: the other
+///   mode (`"planar"` or `"3d"`) when the refusal's cause is that the
+///   motion fits it, else `null`.
 pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32, String) {
     let result = Options::from_json(options).and_then(|o| {
         let table = input::parse(bytes, o.columns.as_ref(), &o.name)?;
@@ -138,6 +208,9 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
         "raw": table.samples,
         "skipped": skipped,
     });
+    if options.mode == Mode::Planar {
+        return planar_success(&table, &options, doc);
+    }
     let samples = &table.samples;
     match fit_timed(samples, &options.config(), options.precision, now_us) {
         Ok(o) => {
@@ -155,6 +228,17 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
     }
 }
 
+/// The error line for the page: the CLI's, but for a refusal as planar,
+/// whose advice names `magcal planar`: the page's planar fit instead.
+pub fn message(err: &CliError) -> String {
+    match err {
+        CliError::Refused(cause @ Error::Planar) => format!(
+            "calibration refused: {cause} (a device that turns about one axis only: fit it as planar)"
+        ),
+        _ => err.to_string(),
+    }
+}
+
 /// The JSON of a refused or failed fit, and its exit code.
 fn failure(err: &CliError, mut doc: Value) -> (u32, String) {
     let code = u32::try_from(err.exit_code()).unwrap_or(2);
@@ -164,11 +248,69 @@ fn failure(err: &CliError, mut doc: Value) -> (u32, String) {
         "error"
     });
     doc["code"] = json!(code);
-    doc["message"] = json!(err.to_string());
+    doc["message"] = json!(message(err));
+    doc["offer"] = match err {
+        CliError::Refused(Error::Planar) => json!("planar"),
+        CliError::Refused(Error::NotPlanar { .. }) => json!("3d"),
+        _ => Value::Null,
+    };
     (code, doc.to_string())
 }
 
-/// The JSON of a successful fit.
+/// The JSON of a planar fit of `table` (`magcal planar`): besides what
+/// [`fit_json`] names, per row `calibrated` (`[u0, u1, 0]`, `u = K (y -
+/// centre)`), `norms` (`|u|`, 1 on the ellipse) and `headings` (degrees,
+/// `null` for a non-finite row), `classes` `null` (the planar fit does not
+/// classify rows), no `warnings`, `snippets.c` `null` (the C API has no
+/// planar calibration) and `packet` `null` (MotionCal's packet holds a
+/// three-dimensional calibration).
+fn planar_success(table: &Table, options: &Options, mut doc: Value) -> (u32, String) {
+    let args = options.planar_args();
+    let formats = [Format::Json, Format::Text];
+    let (line, text) = match planar::outputs(table, &options.name, &args, &formats) {
+        Ok(outputs) => match <[String; 2]>::try_from(outputs) {
+            Ok([line, text]) => (line, text),
+            Err(_) => return failure(&CliError::Input("planar: no output".into()), doc),
+        },
+        Err(err) => return failure(&err, doc),
+    };
+    let fit: Value = serde_json::from_str(&line).unwrap_or(Value::Null);
+    // The calibration as `magcal apply` reads it back from that JSON.
+    let cal = match planar::planar_from_value(&fit) {
+        Ok(cal) => cal,
+        Err(what) => return failure(&CliError::Input(format!("planar: {what}")), doc),
+    };
+    let finite = |v: f64| v.is_finite().then_some(v);
+    let mut calibrated = Vec::with_capacity(table.samples.len());
+    let mut norms = Vec::with_capacity(table.samples.len());
+    let mut headings = Vec::with_capacity(table.samples.len());
+    for s in &table.samples {
+        let [u0, u1] = cal.apply(*s);
+        let ok = u0.is_finite() && u1.is_finite();
+        calibrated.push(json!([u0, u1, 0.0]));
+        norms.push(json!(finite(u0.hypot(u1))));
+        headings.push(json!(ok.then(|| cal.heading_deg(*s))));
+    }
+    doc["status"] = json!("ok");
+    doc["code"] = json!(0);
+    doc["mode"] = json!("planar");
+    doc["fit"] = fit;
+    doc["json"] = json!(line);
+    doc["text"] = json!(text);
+    doc["classes"] = Value::Null;
+    doc["calibrated"] = Value::Array(calibrated);
+    doc["norms"] = Value::Array(norms);
+    doc["headings"] = Value::Array(headings);
+    doc["warnings"] = json!([]);
+    doc["snippets"] = json!({ "c": Value::Null, "rust": snippets::rust_planar(&cal) });
+    doc["packet"] = Value::Null;
+    (0, doc.to_string())
+}
+
+/// The JSON of a successful three-dimensional fit: besides what
+/// [`fit_json`] names, per row `classes`, `calibrated` (`W (y - b)`) and
+/// `norms`, `warnings` (`name` and the core's sentence, `text`), and
+/// `packet` (MotionCal's 68 bytes).
 fn success(
     o: &Outcome,
     samples: &[[f64; 3]],
@@ -190,6 +332,7 @@ fn success(
     };
     doc["status"] = json!("ok");
     doc["code"] = json!(0);
+    doc["mode"] = json!("3d");
     doc["fit"] = serde_json::from_str(&line).unwrap_or(Value::Null);
     doc["json"] = json!(line);
     doc["text"] = json!(output::text(o, name, columns, skipped));
@@ -308,7 +451,8 @@ impl Live {
         })
     }
 
-    /// Fits the collected samples, as [`fit_json`] fits a file.
+    /// Fits the collected samples, as [`fit_json`] fits a file (3-D or
+    /// planar).
     pub fn fit(&self, options: &[u8], now_us: &dyn Fn() -> f64) -> (u32, String) {
         let options = match Options::from_json(options) {
             Ok(o) => o,
@@ -325,6 +469,18 @@ impl Live {
             "rows": samples.len(),
             "raw": samples,
         });
+        if options.mode == Mode::Planar {
+            let table = Table {
+                samples: samples.to_vec(),
+                accel: None,
+                columns: ColumnsUsed {
+                    names: None,
+                    picked: Picked::MotionCal,
+                },
+                skipped: input::Skipped::default(),
+            };
+            return planar_success(&table, &options, doc);
+        }
         match fit_timed(samples, &options.config(), options.precision, now_us) {
             Ok(o) => success(&o, samples, &options.name, &columns, None, doc),
             Err(err) => {
@@ -595,6 +751,100 @@ mod tests {
         assert_eq!((code, doc["status"].as_str()), (2, Some("error")), "{text}");
         let (code, _) = fit_json(b"1,2,3\n", br#"{"precision":"f16"}"#, &|| 0.0);
         assert_eq!(code, 2);
+    }
+
+    /// A level turn about the sensor's -z axis: an ellipse in a plane.
+    fn level_turn(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let psi = i as f64 * 0.05;
+                [
+                    (40.0 + 330.0 * psi.cos()).round(),
+                    (-25.0 - 300.0 * psi.sin()).round(),
+                    (410.0 + (i % 3) as f64).round(),
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_planar_refusal_offers_the_planar_fit_which_is_magcal_planar() {
+        let data = csv(&level_turn(300));
+        let (code, text) = fit_json(&data, br#"{"name":"turn.csv"}"#, &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((code, doc["offer"].as_str()), (3, Some("planar")), "{text}");
+        let message = doc["message"].as_str().unwrap();
+        assert!(message.contains("fit it as planar"), "{message}");
+        assert!(!message.contains("magcal"), "{message}");
+
+        let options = br#"{"name":"turn.csv","mode":"planar","up":"-z","align":"5:90"}"#;
+        let (code, text) = fit_json(&data, options, &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            (doc["mode"].as_str(), doc["fit"]["method"].as_str()),
+            (Some("planar"), Some("planar"))
+        );
+        // What `magcal planar --up -z --align 5:90 --format json` prints.
+        let file =
+            std::env::temp_dir().join(format!("mag-cal-web-turn-{}.csv", std::process::id()));
+        std::fs::write(&file, &data).unwrap();
+        let args = PlanarArgs {
+            file: file.clone(),
+            up: AxisArg::MinusZ,
+            align: Some((5, 90.0)),
+            precision: Precision::F64,
+            format: Format::Json,
+            columns: None,
+        };
+        let mut out = Vec::new();
+        let run = planar::run(&args, &mut out);
+        std::fs::remove_file(&file).unwrap();
+        run.unwrap();
+        assert_eq!(doc["json"].as_str().map(str::as_bytes), Some(&out[..]));
+        // Row 5 is at heading 90 deg; every row on the unit circle.
+        let h5 = doc["headings"][5].as_f64().unwrap();
+        assert!((h5 - 90.0).abs() < 1e-9, "{h5}");
+        for n in doc["norms"].as_array().unwrap() {
+            assert!((n.as_f64().unwrap() - 1.0).abs() < 0.02, "{n}");
+        }
+        assert!(doc["snippets"]["c"].is_null());
+        assert!(doc["snippets"]["rust"]
+            .as_str()
+            .unwrap()
+            .contains("PlanarCalibration::new("));
+        assert!(doc["text"]
+            .as_str()
+            .unwrap()
+            .starts_with("planar (heading-only) calibration of turn.csv"));
+
+        // A three-dimensional recording fitted as planar: refused, and the
+        // three-dimensional fit offered.
+        let (code, text) = fit_json(&csv(&ellipsoid(400)), br#"{"mode":"planar"}"#, &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((code, doc["offer"].as_str()), (3, Some("3d")), "{text}");
+        let (code, _) = fit_json(&data, br#"{"mode":"planar","up":"w"}"#, &|| 0.0);
+        assert_eq!(code, 2);
+    }
+
+    /// A board turning level over the serial port: the 3-D fit refuses it
+    /// as planar and offers the planar fit, which fits what the collector
+    /// kept.
+    #[test]
+    fn a_live_level_turn_fits_as_planar() {
+        let mut live = Live::default();
+        feed(&mut live, &level_turn(600));
+        let (code, text) = live.fit(b"", &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((code, doc["offer"].as_str()), (3, Some("planar")), "{text}");
+        let (code, text) = live.fit(br#"{"mode":"planar"}"#, &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        let kept = live.progress_json()["samples"].as_u64().unwrap();
+        assert_eq!(doc["norms"].as_array().map(Vec::len), Some(kept as usize));
+        let centre = &doc["fit"]["centre"];
+        assert!((centre[0].as_f64().unwrap() - 40.0).abs() < 2.0, "{centre}");
+        assert!((centre[1].as_f64().unwrap() + 25.0).abs() < 2.0, "{centre}");
     }
 
     /// The exports as the page calls them: copy in, call, read out, free.

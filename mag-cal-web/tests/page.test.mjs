@@ -31,10 +31,10 @@ const scratch = mkdtempSync(join(tmpdir(), 'mag-cal-web-'));
 const ROOT = fileURLToPath(new URL('../..', import.meta.url));
 const HEADER_DIR = join(ROOT, 'mag-cal-ffi', 'include');
 
-// `cargo check` of the Rust snippet in a crate of its own that depends on
-// this repository's mag-cal-core (offline: the workspace's lock file and
+// `cargo check` of the Rust snippet and a `caller` of its `calibration()`
+// in a crate of its own that depends on this repository's mag-cal-core (offline: the workspace's lock file and
 // toolchain, its dependencies already fetched).
-function checkRustSnippet(snippet) {
+function checkRustSnippet(snippet, caller = 'pub fn unit() -> Result<[f32; 3], Error> {\n    Ok(calibration()?.apply([1i16, 2, 3]))\n}\n') {
   const dir = join(scratch, 'snippet-rs');
   mkdirSync(join(dir, 'src'), { recursive: true });
   writeFileSync(
@@ -46,7 +46,7 @@ function checkRustSnippet(snippet) {
   writeFileSync(join(dir, 'rust-toolchain.toml'), readFileSync(join(ROOT, 'rust-toolchain.toml')));
   writeFileSync(
     join(dir, 'src', 'lib.rs'),
-    `#![deny(warnings)]\n${snippet}\npub fn unit() -> Result<[f32; 3], Error> {\n    Ok(calibration()?.apply([1i16, 2, 3]))\n}\n`,
+    `#![deny(warnings)]\n${snippet}\n${caller}`,
   );
   const env = { ...process.env, CARGO_TARGET_DIR: join(ROOT, 'target', 'snippet-check') };
   const run = spawnSync('cargo', ['check', '--offline', '--quiet'], { cwd: dir, env, encoding: 'utf8' });
@@ -228,22 +228,190 @@ test('a shared recording shows what magcal fit gives, in f64 and f32', async () 
   await context.close();
 });
 
-test('a refused recording, dropped on the page, shows its reason as the CLI words it', async () => {
-  const { page, errors, context } = await openPage();
-  const file = join(REAL, 'planar_243.txt');
-  const transfer = await page.evaluateHandle((text) => {
-    const dt = new DataTransfer();
-    dt.items.add(new File([text], 'planar_243.txt', { type: 'text/plain' }));
-    return dt;
-  }, readFileSync(file, 'utf8'));
+// `magcal planar --format json` of a file: [exit code, parsed JSON or the
+// stderr line].
+function magcalPlanar(file, ...args) {
+  const run = spawnSync(MAGCAL, ['planar', file, '--format', 'json', ...args], { encoding: 'utf8' });
+  if (run.status === 0) return [0, JSON.parse(run.stdout)];
+  return [run.status, run.stderr.trim()];
+}
+
+// A file dropped on the page, as a user drags it from a file manager.
+async function dropFile(page, file) {
+  const name = file.split('/').pop();
+  const transfer = await page.evaluateHandle(
+    ({ text, name }) => {
+      const dt = new DataTransfer();
+      dt.items.add(new File([text], name, { type: 'text/plain' }));
+      return dt;
+    },
+    { text: readFileSync(file, 'utf8'), name },
+  );
   await page.dispatchEvent('body', 'drop', { dataTransfer: transfer });
-  await page.waitForFunction(() => document.querySelector('#verdict')?.textContent.endsWith('planar_243.txt'));
-  const [code, message] = magcal(file);
+  await page.waitForFunction((n) => document.querySelector('#verdict')?.textContent.endsWith(n), name);
+}
+
+// What the page shows of a result: figures, plots, clouds, snippets,
+// report and outputs.
+async function resultShown(page) {
+  return page.evaluate(() => {
+    const q = (sel) => document.querySelector(sel);
+    return {
+      figures: document.querySelectorAll('#figures [data-name]:not([data-name="input"])').length,
+      outcomeHidden: q('#outcome').hidden,
+      normDots: document.querySelectorAll('#norms circle').length,
+      normsSvg: q('#norms').innerHTML,
+      cloud: window.magcal.views.cal.count,
+      snippetC: q('#snippet-c').textContent,
+      snippetRust: q('#snippet-rust').textContent,
+      report: q('#report').textContent,
+      enabled: ['download', 'copy-c', 'copy-rust', 'send'].filter((id) => !q(`#${id}`).disabled),
+      result: window.magcal.result,
+    };
+  });
+}
+
+// A refusal shows only the refusal: nothing of an earlier result is left.
+async function assertCleared(page) {
+  const r = await resultShown(page);
+  assert.equal(r.figures, 0, 'figures of an earlier fit');
+  assert.ok(r.outcomeHidden, 'the plots and outputs are hidden');
+  assert.equal(r.normDots, 0, 'norm plot');
+  assert.equal(r.normsSvg, '', 'norm plot');
+  assert.equal(r.cloud, 0, 'calibrated cloud');
+  assert.deepEqual([r.snippetC, r.snippetRust, r.report], ['', '', ''], 'snippets and report');
+  assert.deepEqual(r.enabled, [], 'download, copy and send buttons');
+  assert.equal(r.result, null);
+  assert.doesNotMatch(await page.textContent('#message'), /Warning/);
+}
+
+// A good fit, to be cleared by what follows.
+async function goodFit(page) {
+  await openFile(page, join(REAL, 'icm20948_mag_300.csv'));
+  assert.match(await page.textContent('#verdict'), /^Calibrated: /);
+  const r = await resultShown(page);
+  assert.ok(r.figures > 10 && r.normDots > 250 && r.cloud > 250, JSON.stringify({ ...r, result: null }));
+  assert.ok(r.snippetC.includes('magcal_apply') && r.snippetRust.includes('Calibration::new'));
+  assert.deepEqual(r.enabled, ['download', 'copy-c', 'copy-rust']);
+}
+
+// The CLI's reason without its advice in parentheses.
+const reason = (cliLine) => cliLine.replace(/^magcal: /, '').replace(/ \([^()]*\)$/, '');
+
+test('a planar recording after a good fit: the refusal clears every result and offers the planar fit, which is magcal planar', async () => {
+  const { page, errors, context } = await openPage();
+  await goodFit(page);
+
+  const file = join(REAL, 'planar_243.txt');
+  await dropFile(page, file);
+  assert.match(await page.textContent('#verdict'), /^Refused: planar_243.txt/);
+  await assertCleared(page);
+  // The CLI's reason; the advice names what the page offers, no command.
+  const [code, cliLine] = magcal(file);
   assert.equal(code, 3);
-  assert.match(await page.textContent('#verdict'), /^Refused/);
-  assert.equal(`magcal: ${await page.textContent('#message')}`, message);
-  assert.ok(await page.isDisabled('#download'));
+  const message = await page.textContent('#message');
+  assert.ok(message.startsWith(reason(cliLine)), `${message} | ${cliLine}`);
+  assert.doesNotMatch(message, /magcal|--\w|'/);
+  assert.match(message, /fit it as planar\)$/);
+  assert.equal(await page.textContent('#offer-fit'), 'Fit as planar (turns about one axis)');
+  assert.ok(await page.isVisible('#offer-fit'));
   await page.screenshot({ path: join(SHOTS, 'refused-planar_243.png'), fullPage: true });
+
+  // The offered fit runs and shows what `magcal planar` gives.
+  await page.click('#offer-fit');
+  await page.waitForFunction(() => document.querySelector('#verdict').textContent.startsWith('Calibrated (planar)'));
+  assert.equal(await page.inputValue('#mode'), 'planar');
+  const [pcode, cli] = magcalPlanar(file);
+  assert.equal(pcode, 0);
+  await assertSamePlanar(page, cli);
+  await page.screenshot({ path: join(SHOTS, 'planar-planar_243.png'), fullPage: true });
+  // The download is that JSON, and `magcal apply` reads it: its headings
+  // are those the page computed from it.
+  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#download')]);
+  const saved = JSON.parse(readFileSync(await download.path(), 'utf8'));
+  assert.deepEqual(saved, cli);
+  const calFile = join(scratch, 'planar_243.json');
+  writeFileSync(calFile, JSON.stringify(saved));
+  const applied = execFileSync(MAGCAL, ['apply', calFile, file], { encoding: 'utf8' }).trim().split('\n').slice(1);
+  const headings = await page.evaluate(() => window.magcal.result.headings);
+  assert.equal(applied.length, headings.length);
+  applied.forEach((row, i) => assertClose(headings[i], Number(row.split(',')[2]), 1e-9, `heading of row ${i}`));
+  // No C (the C API has no planar calibration), and it says so; the Rust
+  // snippet builds and gives headings.
+  const r = await resultShown(page);
+  assert.equal(r.snippetC, '');
+  assert.match(await page.textContent('#c-summary'), /no planar calibration/);
+  assert.deepEqual(r.enabled, ['download', 'copy-rust']);
+  checkRustSnippet(r.snippetRust, 'pub fn heading() -> Result<f32, Error> {\n    Ok(calibration()?.heading_deg([1i16, 2, 3]))\n}\n');
+  // Every row in the calibrated cloud (the file has no unreadable line).
+  assert.equal(r.cloud, readFileSync(file, 'utf8').trim().split('\n').length);
+
+  // The up axis and heading 0 as the CLI's --up and --align.
+  await page.selectOption('#up', 'z');
+  await page.fill('#align', '10:45');
+  await page.press('#align', 'Enter');
+  await page.waitForFunction(() => window.magcal.result?.fit.up === 'z' && window.magcal.result.fit.zero_deg !== 0);
+  const [, aligned] = magcalPlanar(file, '--up', 'z', '--align', '10:45');
+  await assertSamePlanar(page, aligned);
+  assertClose(await page.evaluate(() => window.magcal.result.headings[10]), 45, 1e-9, 'heading of row 10');
+
+  // A 3-D recording in planar mode is refused (after a good planar fit),
+  // everything cleared, and the 3-D fit offered.
+  const full = join(REAL, 'icm20948_mag_300.csv');
+  await openFile(page, full);
+  assert.match(await page.textContent('#verdict'), /^Refused/);
+  await assertCleared(page);
+  const [, planarLine] = magcalPlanar(full, '--up', 'z');
+  assert.equal(`magcal: ${await page.textContent('#message')}`, planarLine);
+  assert.equal(await page.textContent('#offer-fit'), 'Fit in 3-D (turns in every direction)');
+  await page.click('#offer-fit');
+  await page.waitForFunction(() => document.querySelector('#verdict').textContent.startsWith('Calibrated: '));
+  assertSameCalibration(await shown(page), magcal(full)[1], 1e-9);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+async function assertSamePlanar(page, cli) {
+  const v = await page.evaluate(() =>
+    Object.fromEntries([...document.querySelectorAll('#figures [data-value]')].map((e) => [e.dataset.name, Number(e.dataset.value)])),
+  );
+  for (let i = 0; i < 3; i += 1) {
+    assertClose(v[`a${i}`], cli.axis[i], 1e-12, `axis[${i}]`);
+    assertClose(v[`c${i}`], cli.centre[i], 1e-12, `centre[${i}]`);
+    for (let r = 0; r < 2; r += 1) assertClose(v[`K${r}${i}`], cli.matrix[r][i], 1e-12, `K[${r}][${i}]`);
+  }
+  assertClose(v.zero, cli.zero_deg, 1e-12, 'zero');
+  assertClose(v['field in the plane'], cli.plane_strength, 1e-12, 'field in the plane');
+  assertClose(v['fit error'], cli.fit_error, 1e-12, 'fit error');
+  assertClose(v.flatness, cli.flatness, 1e-12, 'flatness');
+  assert.equal(v.sectors, cli.sectors);
+  const samples = await page.textContent('[data-name="samples"]');
+  assert.equal(samples, `${cli.samples_used} used of 243: ${cli.samples_dropped} dropped, ${cli.screened} screened, ${cli.rejected} rejected`);
+}
+
+test('a still device after a good fit: the refusal clears every result and says why', async () => {
+  const { page, errors, context } = await openPage();
+  await goodFit(page);
+  // One reading repeated with noise of about 1.5 counts (a fixed
+  // pseudo-random sequence), as a board left lying on the desk.
+  let seed = 12345;
+  const noise = () => {
+    seed = (seed * 1103515245 + 12345) % 2 ** 31;
+    return (seed / 2 ** 31 - 0.5) * 5;
+  };
+  const rows = Array.from({ length: 400 }, () => [210 + noise(), -35 + noise(), 480 + noise()].map((v) => v.toFixed(2)).join(','));
+  const file = join(scratch, 'still.csv');
+  writeFileSync(file, `x,y,z\n${rows.join('\n')}\n`);
+  await dropFile(page, file);
+  assert.match(await page.textContent('#verdict'), /^Refused: still.csv/);
+  await assertCleared(page);
+  const [code, cliLine] = magcal(file);
+  assert.equal(code, 3);
+  const message = await page.textContent('#message');
+  assert.equal(`magcal: ${message}`, cliLine);
+  assert.doesNotMatch(message, /magcal|--\w/);
+  assert.ok(await page.isHidden('#offer'), 'no other fit offered');
+  assert.match(await page.textContent('#figures'), /^400 rows from x,y,z /);
   assert.deepEqual(errors, []);
   await context.close();
 });

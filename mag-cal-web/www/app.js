@@ -18,12 +18,13 @@ const calView = new Cloud($('cal-view'), { sphere: true });
 // What the page shows; read by the browser tests.
 const state = {
   source: null, // 'file' or 'serial'
-  result: null, // the core's last fit document
+  result: null, // the core's fit document shown (null when none is)
   progress: null, // the collector's last progress
   raw: [], // samples received over serial
   sent: 0, // packets written to the board
 };
 state.core = core;
+state.views = { raw: rawView, cal: calView };
 window.magcal = state;
 
 for (const m of info.methods) $('method').append(new Option(m, m));
@@ -32,11 +33,24 @@ buildCells();
 function options(name) {
   return {
     name,
+    mode: $('mode').value,
     precision: $('precision').value,
     method: $('method').value,
     plain: $('plain').checked,
     columns: $('columns').value.trim(),
+    up: $('up').value,
+    align: $('align').value.trim(),
   };
+}
+
+const planarMode = () => $('mode').value === 'planar';
+
+// Each fit's own controls: method and outlier handling for the 3-D fit,
+// up axis and heading 0 for the planar one.
+function syncMode() {
+  const planar = planarMode();
+  for (const id of ['method', 'plain']) $(id).disabled = planar;
+  for (const id of ['up', 'align']) $(id).disabled = !planar;
 }
 
 function setStatus(text, kind = '') {
@@ -65,20 +79,37 @@ function fitFile() {
     coreFailed(err);
     return;
   }
-  rawView.setPoints(doc.raw ?? [], doc.classes, doc.fit?.hard_iron, doc.fit?.field_strength);
+  rawView.setPoints(doc.raw ?? [], doc.classes, ...frame(doc));
   showResult(doc, lastFile.name);
+}
+
+// The centre and radius of the raw view for a fit: the hard iron and the
+// field, or the planar fit's centre and field in the plane.
+function frame(doc) {
+  if (doc?.status !== 'ok') return [null, null];
+  return doc.mode === 'planar' ? [doc.fit.centre, doc.fit.plane_strength] : [doc.fit.hard_iron, doc.fit.field_strength];
+}
+
+function refit() {
+  if (state.source === 'serial') fitLive(true);
+  else fitFile();
 }
 
 $('file').addEventListener('change', (e) => {
   if (e.target.files.length) openFile(e.target.files[0]);
+  // Choosing the same file again (changed, or after another) reads it again.
+  e.target.value = '';
 });
 document.addEventListener('dragover', (e) => e.preventDefault());
 document.addEventListener('drop', (e) => {
   e.preventDefault();
   if (e.dataTransfer.files.length) openFile(e.dataTransfer.files[0]);
 });
-for (const id of ['precision', 'method', 'plain', 'columns']) {
-  $(id).addEventListener('change', () => (state.source === 'serial' ? fitLive(true) : fitFile()));
+for (const id of ['precision', 'method', 'plain', 'columns', 'mode', 'up', 'align']) {
+  $(id).addEventListener('change', () => {
+    syncMode();
+    refit();
+  });
 }
 
 // ---- a board over WebSerial -----------------------------------------------
@@ -91,6 +122,7 @@ let acceptedSinceFit = 0;
 
 // What a failed call of the core means for the page.
 function coreFailed(err) {
+  clearResult();
   if (err instanceof CoreRestarted) {
     state.raw = [];
     state.progress = null;
@@ -116,7 +148,8 @@ async function connect() {
   session += 1;
   state.source = 'serial';
   state.raw = [];
-  state.result = null;
+  clearResult();
+  $('result').hidden = true;
   state.streamEnded = false;
   lastFile = null;
   acceptedSinceFit = 0;
@@ -196,15 +229,17 @@ function redrawLive() {
     const p = state.progress;
     if (!p) return;
     showProgress(p);
-    rawView.setPoints(state.raw, null, state.result?.fit?.hard_iron, state.result?.fit?.field_strength);
-    // Refit as the collection grows, once it is ready.
-    if (p.ready && acceptedSinceFit >= 25) fitLive(false);
+    rawView.setPoints(state.raw, null, ...frame(state.result));
+    // Refit as the collection grows, once it is ready (planar: the
+    // collector's coverage of the sphere never is; the fit says when the
+    // turns suffice).
+    if ((p.ready || planarMode()) && acceptedSinceFit >= 25) fitLive(false);
   });
 }
 
 function fitLive(force) {
   if (state.source !== 'serial' || !state.progress) return;
-  if (!force && !state.progress.ready) return;
+  if (!force && !state.progress.ready && !planarMode()) return;
   acceptedSinceFit = 0;
   let doc;
   try {
@@ -308,30 +343,96 @@ function figure(name, value, note = '') {
   return `<tr><th>${name}</th><td data-name="${name}"${data}>${v}</td><td class="note">${note}</td></tr>`;
 }
 
+const RAW_CAPTION = {
+  '3d': 'Raw samples, centred on b and divided by the field strength (before a fit: centred on their middle, scaled by their median distance)',
+  planar: "Raw samples, centred on the planar fit's centre and divided by the field in the plane",
+};
+const CAL_CAPTION = {
+  '3d': 'Calibrated samples on the unit sphere: <span class="used">used</span>, <span class="rejected">rejected</span>, <span class="screened">screened</span>',
+  planar: 'Planar calibration: u = K (y − centre) of every sample, on the unit circle (z = 0); the planar fit does not mark rows',
+};
+const NORMS_CAPTION = {
+  '3d': '|W (y − b)| per sample, in input order (1 = the field)',
+  planar: '|K (y − centre)| per sample, in input order (1 = the field in the plane)',
+};
+const OFFER = {
+  planar: ['Fit as planar (turns about one axis)', () => `with the up axis set above (now ${$('up').selectedOptions[0].text})`],
+  '3d': ['Fit in 3-D (turns in every direction)', () => ''],
+};
+
+// Takes every result off the page (figures, warnings, plots, 3-D cloud,
+// snippets, report, downloads, send to board): before any fit is shown,
+// so that a refusal shows only the refusal.
+function clearResult() {
+  state.result = null;
+  $('verdict').textContent = '';
+  $('message').textContent = '';
+  $('message').className = 'message';
+  $('offer').hidden = true;
+  $('figures').innerHTML = '';
+  $('outcome').hidden = true;
+  $('norms').innerHTML = '';
+  $('norms-caption').textContent = NORMS_CAPTION['3d'];
+  calView.setPoints([], null, null, null);
+  $('cal-caption').innerHTML = CAL_CAPTION['3d'];
+  $('raw-caption').textContent = RAW_CAPTION['3d'];
+  for (const id of ['snippet-c', 'snippet-rust', 'report', 'send-status']) $(id).textContent = '';
+  $('c-summary').textContent = 'C';
+  $('report-command').textContent = 'magcal fit';
+  for (const id of ['download', 'copy-c', 'copy-rust', 'send']) {
+    $(id).disabled = true;
+    $(id).title = '';
+  }
+}
+
 function showResult(doc, name) {
-  state.result = doc;
+  clearResult();
   $('result').hidden = false;
   const ok = doc.status === 'ok';
   $('verdict').textContent = ok
-    ? `Calibrated: ${name}`
+    ? `Calibrated${doc.mode === 'planar' ? ' (planar)' : ''}: ${name}`
     : doc.status === 'refused'
       ? `Refused: ${name}`
       : `Not read: ${name}`;
   $('verdict').className = ok ? 'good' : 'bad';
-  $('message').textContent = ok ? warningText(doc) : doc.message;
-  $('message').className = `message ${ok ? (doc.warnings.length ? 'warn' : '') : 'bad'}`;
-  for (const id of ['download', 'copy-c', 'copy-rust']) $(id).disabled = !ok;
-  $('send').disabled = !ok || !port;
   if (!ok) {
+    $('message').textContent = doc.message;
+    $('message').className = 'message bad';
+    // The other fit, where the refusal's cause says the motion suits it.
+    if (OFFER[doc.offer]) {
+      const [label, hint] = OFFER[doc.offer];
+      $('offer-fit').textContent = label;
+      $('offer-fit').dataset.mode = doc.offer;
+      $('offer-hint').textContent = hint();
+      $('offer').hidden = false;
+    }
     $('figures').innerHTML = doc.columns
       ? `<p>${doc.rows} rows from ${html(doc.columns)}</p>${doc.skipped ? `<p data-name="input">${html(doc.skipped)}</p>` : ''}`
       : '';
-    $('norms').innerHTML = '';
-    calView.setPoints([], null, null, null);
-    $('report').textContent = '';
     setStatus(doc.message, 'bad');
     return;
   }
+  state.result = doc;
+  $('outcome').hidden = false;
+  $('message').textContent = warningText(doc);
+  $('message').className = `message ${doc.warnings.length ? 'warn' : ''}`;
+  $('download').disabled = false;
+  $('copy-rust').disabled = false;
+  $('snippet-rust').textContent = doc.snippets.rust;
+  $('report').textContent = doc.text;
+  $('cal-caption').innerHTML = CAL_CAPTION[doc.mode];
+  $('raw-caption').textContent = RAW_CAPTION[doc.mode];
+  $('norms-caption').textContent = NORMS_CAPTION[doc.mode];
+  calView.setPoints(doc.calibrated, doc.classes, [0, 0, 0], 1);
+  drawNorms(doc.norms, doc.classes);
+  if (doc.mode === 'planar') showPlanar(doc);
+  else show3d(doc);
+  const what = doc.mode === 'planar' ? 'Calibrated as planar (heading only)' : 'Calibrated';
+  const then = doc.packet ? 'keep turning to refine, or send it' : 'keep turning to refine';
+  setStatus(state.source === 'serial' ? `${what} from the board: ${then}.` : `${what}.`, 'good');
+}
+
+function show3d(doc) {
   const f = doc.fit;
   const q = f.quality;
   const w = f.soft_iron;
@@ -352,12 +453,41 @@ function showResult(doc, name) {
     ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
     </table>`;
   $('snippet-c').textContent = doc.snippets.c;
-  $('snippet-rust').textContent = doc.snippets.rust;
-  $('report').textContent = doc.text;
-  calView.setPoints(doc.calibrated, doc.classes, [0, 0, 0], 1);
-  drawNorms(doc.norms, doc.classes);
-  setStatus(state.source === 'serial' ? 'Calibrated from the board: keep turning to refine, or send it.' : 'Calibrated.', 'good');
+  $('copy-c').disabled = false;
+  $('send').disabled = !port;
 }
+
+const vector = (prefix, v) =>
+  `<span class="vec">${v.map((x, i) => `<span data-name="${prefix}${i}" data-value="${x}">${digits(x)}</span>`).join(' ')}</span>`;
+
+function showPlanar(doc) {
+  const f = doc.fit;
+  const align = options('').align;
+  $('figures').innerHTML = `<table class="figures">
+    ${figure('turn axis', vector('a', f.axis), `unit vector; ${digits(f.axis_tilt_deg, 3)} deg from the up axis ${f.up}`)}
+    ${figure('centre', vector('c', f.centre), 'sensor units: the hard iron in the plane; along the axis it is not observable')}
+    ${figure('K', `<span class="mat">${f.matrix.map((row, r) => row.map((v, c) => `<span data-name="K${r}${c}" data-value="${v}">${digits(v)}</span>`).join(' ')).join('<br>')}</span>`, 'u = K (y − centre) on the unit circle; heading = angle(u) − zero')}
+    ${figure('zero', f.zero_deg, align ? `deg: row ${html(align)}` : 'deg, arbitrary: set “heading 0 at” above')}
+    ${figure('field in the plane', f.plane_strength, 'sensor units')}
+    ${figure('fit error', f.fit_error, 'robust sigma of |u| − 1; refused above 0.2')}
+    ${figure('flatness', f.flatness, `refused above 0.06 (not turns about one axis); thickness ${digits(f.thickness, 3)} of the field in the plane`)}
+    ${figure('coverage', `<span data-name="sectors" data-value="${f.sectors}">${f.sectors}</span> of 12 sectors of 30 deg`, 'refused below 8')}
+    ${figure('columns', html(doc.columns))}
+    ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
+    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
+    ${figure('method', `planar (heading only), ${f.precision}, up ${f.up}`)}
+    </table>`;
+  $('c-summary').textContent = 'C: none, the C API (mag_cal.h) has no planar calibration';
+  $('copy-c').title = 'The C API has no planar calibration.';
+  $('send').title = "MotionCal's packet holds a 3-D calibration: a planar one is not sent.";
+  $('report-command').textContent = 'magcal planar';
+}
+
+$('offer-fit').addEventListener('click', () => {
+  $('mode').value = $('offer-fit').dataset.mode;
+  syncMode();
+  refit();
+});
 
 function warningText(doc) {
   if (!doc.warnings.length) return 'No warnings.';
@@ -366,16 +496,21 @@ function warningText(doc) {
 
 // The norms of the used samples set the scale (at least 0.9 to 1.1); the
 // others (a wild reading may be 100 fields away) sit clamped at the edges.
+// A fit that marks no rows (planar): the middle 98 % of the norms set it.
 function drawNorms(norms, classes) {
   const svg = $('norms');
-  const used = norms.filter((v, i) => Number.isFinite(v) && classes[i] === 'used');
-  const lo = Math.min(0.9, ...used);
-  const hi = Math.max(1.1, ...used);
+  const finite = norms.filter(Number.isFinite);
+  const sorted = [...finite].sort((a, b) => a - b);
+  const scaled = classes
+    ? norms.filter((v, i) => Number.isFinite(v) && classes[i] === 'used')
+    : sorted.slice(Math.floor(sorted.length * 0.01), Math.ceil(sorted.length * 0.99));
+  const lo = Math.min(0.9, ...scaled);
+  const hi = Math.max(1.1, ...scaled);
   const x = (i) => (norms.length > 1 ? (i / (norms.length - 1)) * 790 + 5 : 400);
   const y = (v) => 215 - ((Math.min(Math.max(v, lo), hi) - lo) / (hi - lo)) * 210;
-  const off = norms.filter((v) => Number.isFinite(v) && (v < lo || v > hi)).length;
+  const off = finite.filter((v) => v < lo || v > hi).length;
   const dots = norms
-    .map((v, i) => (Number.isFinite(v) ? `<circle class="${classes[i].split(':')[0]}" cx="${x(i).toFixed(1)}" cy="${y(v).toFixed(1)}" r="1.6"/>` : ''))
+    .map((v, i) => (Number.isFinite(v) ? `<circle class="${classes ? classes[i].split(':')[0] : 'row'}" cx="${x(i).toFixed(1)}" cy="${y(v).toFixed(1)}" r="1.6"/>` : ''))
     .join('');
   svg.innerHTML =
     `<line class="unit" x1="0" x2="800" y1="${y(1)}" y2="${y(1)}"/>` +
@@ -397,7 +532,7 @@ $('download').addEventListener('click', () => {
 $('copy-c').addEventListener('click', () => navigator.clipboard.writeText(state.result.snippets.c));
 $('copy-rust').addEventListener('click', () => navigator.clipboard.writeText(state.result.snippets.rust));
 $('send').addEventListener('click', async () => {
-  if (!port?.writable || state.result?.status !== 'ok') return;
+  if (!port?.writable || !state.result?.packet) return;
   $('send').disabled = true;
   try {
     const writer = port.writable.getWriter();
@@ -411,8 +546,10 @@ $('send').addEventListener('click', async () => {
   } catch (err) {
     $('send-status').textContent = `Not sent: ${err.message}`;
   } finally {
-    $('send').disabled = !port;
+    $('send').disabled = !port || !state.result?.packet;
   }
 });
 
+syncMode();
+clearResult();
 state.ready = true;

@@ -86,6 +86,8 @@ export class Cloud {
       col.setHex(COLOURS[classes ? classes[i].split(':')[0] : 'raw'] ?? COLOURS.raw);
       colour.push(col.r, col.g, col.b);
     });
+    // The points drawn (read by the browser tests).
+    this.count = position.length / 3;
     this.geometry.setAttribute('position', new THREE.Float32BufferAttribute(position, 3));
     this.geometry.setAttribute('color', new THREE.Float32BufferAttribute(colour, 3));
     this.geometry.computeBoundingSphere();
