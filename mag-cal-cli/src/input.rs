@@ -55,6 +55,8 @@ use std::path::{Path, PathBuf};
 use crate::cli::Columns;
 use crate::error::CliError;
 
+mod labelled;
+
 /// Where the samples come from.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Source {
@@ -222,14 +224,19 @@ pub struct Table {
 
 /// Lines of an input that were neither samples nor comments nor blank:
 /// data lines that could not be read, each kept as a non-finite row (the
-/// fit drops and counts it; `apply` keeps the row order), and copies of
-/// the header line after the first, skipped.
+/// fit drops and counts it; `apply` keeps the row order), copies of the
+/// header line after the first, skipped, and lines without a magnetometer
+/// reading, skipped.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Skipped {
     /// Data lines that could not be read.
     pub unreadable: usize,
     /// Copies of the header line after the first.
     pub header_copies: usize,
+    /// Lines without a magnetometer reading: metadata before the header
+    /// (`Fs,50.00`), a sketch's banner and other sensors' lines in a
+    /// labelled log (`Accel X: 0.1 Y: 0.2 Z: 9.8 m/s^2`).
+    pub no_reading: usize,
     /// The first [`Skipped::EXAMPLES`] of them, e.g. `line 104: 'abc' is
     /// not a number`.
     pub examples: Vec<String>,
@@ -241,13 +248,14 @@ impl Skipped {
 
     /// Whether every line was a sample, a comment or blank.
     pub fn is_empty(&self) -> bool {
-        self.unreadable == 0 && self.header_copies == 0
+        self.unreadable == 0 && self.header_copies == 0 && self.no_reading == 0
     }
 
     /// One line for a report, e.g. `2 unreadable lines kept as non-finite
-    /// rows (dropped), 1 copy of the header skipped: line 74: a copy of the
-    /// header; line 104: 'abc' is not a number; ...`; `None` when
-    /// [`Skipped::is_empty`].
+    /// rows (dropped), 1 copy of the header skipped, 2 lines without a
+    /// magnetometer reading skipped: line 1: 'Fs,50.00'; line 2:
+    /// 'Initialization time,60'; line 74: a copy of the header; ...`; `None`
+    /// when [`Skipped::is_empty`].
     pub fn note(&self) -> Option<String> {
         if self.is_empty() {
             return None;
@@ -272,7 +280,17 @@ impl Skipped {
                 )
             ));
         }
-        let total = self.unreadable + self.header_copies;
+        if self.no_reading > 0 {
+            parts.push(format!(
+                "{} skipped",
+                plural(
+                    self.no_reading,
+                    "line without a magnetometer reading",
+                    "lines without a magnetometer reading"
+                )
+            ));
+        }
+        let total = self.unreadable + self.header_copies + self.no_reading;
         let more = if total > self.examples.len() {
             "; ..."
         } else {
@@ -300,7 +318,8 @@ impl Skipped {
 /// `magx,magy,magz (from the header)`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ColumnsUsed {
-    /// The header's names of the x, y, z columns, when there is a header.
+    /// The header's names of the x, y, z columns, when there is a header;
+    /// in labelled lines, the values' labels and unit (`Mag X (uT)`).
     pub names: Option<[String; 3]>,
     /// The rule.
     pub picked: Picked,
@@ -318,6 +337,12 @@ pub enum Picked {
     Header,
     /// The magnetometer fields of MotionCal `Raw:` lines.
     MotionCal,
+    /// By 1-based field number, `--columns 7,8,9` (in labelled lines: the
+    /// line's 7th, 8th and 9th numbers).
+    Fields([usize; 3]),
+    /// The magnetometer's labelled values ([`labelled`]), without
+    /// `--columns`.
+    Labels,
 }
 
 /// The prefix of a MotionCal raw line.
@@ -335,20 +360,37 @@ fn is_motioncal(text: &str) -> bool {
         .any(|(_, line)| line.trim_start().starts_with(MOTIONCAL_PREFIX))
 }
 
+impl ColumnsUsed {
+    /// Whether the columns were found by a rule that may guess wrong (in
+    /// the header, or among labelled values), so that a report must name
+    /// them.
+    pub fn detected(&self) -> bool {
+        matches!(self.picked, Picked::Header | Picked::Labels)
+    }
+}
+
 impl fmt::Display for ColumnsUsed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let how = match self.picked {
-            Picked::FirstThree => "the first three fields",
-            Picked::Named => "--columns",
-            Picked::Header => "from the header",
-            Picked::MotionCal => "MotionCal Raw: lines, fields 7-9 (10 per uT)",
+            Picked::FirstThree => "the first three fields".to_owned(),
+            Picked::Named => "--columns".to_owned(),
+            Picked::Header => "from the header".to_owned(),
+            Picked::MotionCal => "MotionCal Raw: lines, fields 7-9 (10 per uT)".to_owned(),
+            Picked::Fields([a, b, c]) if self.names.is_some() => {
+                format!("fields {a},{b},{c}, --columns")
+            }
+            Picked::Fields([a, b, c]) => format!("fields {a},{b},{c} (--columns)"),
+            Picked::Labels => "labelled values".to_owned(),
         };
+        if let (Picked::Fields(_), None) = (self.picked, &self.names) {
+            return f.write_str(&how);
+        }
         match &self.names {
             Some(names) => {
                 let names: Vec<String> = names.iter().map(|n| excerpt(n)).collect();
                 write!(f, "{} ({how})", names.join(","))
             }
-            None => f.write_str(how),
+            None => f.write_str(&how),
         }
     }
 }
@@ -363,10 +405,10 @@ pub fn parse_with_accel(
 ) -> Result<Table, CliError> {
     let text = String::from_utf8_lossy(bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let mut lines = content_lines(text).peekable();
-    let Some((first_no, first)) = lines.next() else {
+    let lines: Vec<(usize, &str)> = content_lines(text).collect();
+    if lines.is_empty() {
         return Err(CliError::Input(format!("{source_name}: no data rows")));
-    };
+    }
     if is_motioncal(text) {
         if columns.is_some() {
             return Err(CliError::Input(format!(
@@ -380,40 +422,92 @@ pub fn parse_with_accel(
         }
         return Ok(motioncal(text, accel != Accel::None));
     }
-    let separator = Separator::detect(first);
-    let first_fields = separator.fields(first);
-    let has_header = first_fields.iter().any(|f| number(f).is_none());
-    let header = has_header.then_some(first_fields.as_slice());
-    let needs_header = |option: &str| {
-        CliError::Input(format!(
-            "{source_name}: {option} needs a header line naming the columns, \
-             but line {first_no} is data"
-        ))
-    };
+    if lines
+        .iter()
+        .take(SNIFF_LINES)
+        .any(|(_, line)| labelled::holds_reading(line))
+    {
+        return labelled::read(&lines, SNIFF_LINES, columns, accel, source_name);
+    }
+    delimited(&lines, columns, accel, source_name)
+}
 
-    let (indices, picked) = match (columns, header) {
-        (None, _) => {
-            let first_row = if has_header {
-                lines.peek().map(|&(_, line)| separator.fields(line))
-            } else {
-                Some(first_fields.clone())
-            };
-            let numeric = first_row.map_or(0, |fields| {
-                fields.iter().filter(|f| number(f).is_some()).count()
+/// How many of the first content lines decide the format: whether the
+/// lines are labelled ([`labelled`]), which labelled values are the
+/// magnetometer's, and where a table's data begin after metadata and its
+/// header. Sketches print a banner first (Adafruit's ICM-20948 example:
+/// 9 lines of settings, then 4 lines per reading, the magnetometer's on
+/// the 13th), and loggers a few lines of metadata (`Fs,50.00`).
+pub const SNIFF_LINES: usize = 40;
+
+/// The number of numeric fields of `line`, split at its own separator.
+fn numeric_fields(line: &str) -> usize {
+    let separator = Separator::detect(line);
+    separator
+        .fields(line)
+        .iter()
+        .filter(|f| number(f).is_some())
+        .count()
+}
+
+/// Reads a table: delimited fields, an optional header (after optional
+/// metadata lines), one sample per line (see the module docs).
+fn delimited(
+    lines: &[(usize, &str)],
+    columns: Option<&Columns>,
+    accel: Accel<'_>,
+    source_name: &str,
+) -> Result<Table, CliError> {
+    // The first data line has at least three numeric fields; the header is
+    // the last line before it with at least three fields, one of them not
+    // a number; lines before the header (or before the data, without one)
+    // are metadata. Without such a data line among the first, the first
+    // line is the header when one of its fields is not a number.
+    let data_at = lines
+        .iter()
+        .take(SNIFF_LINES)
+        .position(|(_, line)| numeric_fields(line) >= 3);
+    let (separator, header_at, start) = match data_at {
+        Some(data_at) => {
+            let separator = Separator::detect(lines[data_at].1);
+            let header_at = lines[..data_at].iter().rposition(|(_, line)| {
+                let fields = separator.fields(line);
+                fields.len() >= 3 && fields.iter().any(|f| number(f).is_none())
+            });
+            (separator, header_at, header_at.map_or(data_at, |h| h + 1))
+        }
+        None => {
+            let separator = Separator::detect(lines[0].1);
+            let is_header = separator
+                .fields(lines[0].1)
+                .iter()
+                .any(|f| number(f).is_none());
+            (separator, is_header.then_some(0), usize::from(is_header))
+        }
+    };
+    let header_fields = header_at.map(|h| separator.fields(lines[h].1));
+    let header = header_fields.as_deref();
+    let first_row = lines.get(data_at.unwrap_or(start));
+    let first_no = first_row.map_or(lines[0].0, |&(no, _)| no);
+
+    let (indices, picked) = match columns {
+        None => {
+            let numeric = first_row.map_or(0, |&(_, line)| {
+                separator
+                    .fields(line)
+                    .iter()
+                    .filter(|f| number(f).is_some())
+                    .count()
             });
             default_indices(header, numeric, source_name)?
         }
-        (Some(Columns(names)), Some(header)) => {
-            (named_indices(header, names, source_name)?, Picked::Named)
-        }
-        (Some(_), None) => return Err(needs_header("--columns")),
+        Some(columns) => column_indices(header, columns, "--columns", first_no, source_name)?,
     };
     let accel_indices = match (accel, header) {
         (Accel::None, _) | (Accel::Detect, None) => None,
-        (Accel::Named(Columns(names)), Some(header)) => {
-            Some(named_indices(header, names, source_name)?)
-        }
-        (Accel::Named(_), None) => return Err(needs_header("--accel-columns")),
+        (Accel::Named(columns), _) => Some(
+            column_indices(header, columns, "--accel-columns", first_no, source_name)?.0,
+        ),
         (Accel::Detect, Some(header)) => ACCEL_NAMES
             .iter()
             .find_map(|names| named_indices(header, names, source_name).ok())
@@ -426,13 +520,16 @@ pub fn parse_with_accel(
         picked,
     };
 
-    let data_first = (!has_header).then_some((first_no, first));
     let mut samples = Vec::new();
     let mut accel_rows = accel_indices.map(|_| Vec::new());
     let mut skipped = Skipped::default();
+    for &(line_no, line) in &lines[..header_at.unwrap_or(start)] {
+        skipped.no_reading += 1;
+        skipped.add(|| format!("line {line_no}: '{}'", excerpt(line.trim())));
+    }
     // The first line that could not be read: the error when none could.
     let mut first_error = None;
-    for (line_no, line) in data_first.into_iter().chain(lines) {
+    for &(line_no, line) in &lines[start..] {
         let fields = separator.fields(line);
         if header.is_some_and(|h| same_fields(h, &fields)) {
             skipped.header_copies += 1;
@@ -471,6 +568,47 @@ pub fn parse_with_accel(
         columns,
         skipped,
     })
+}
+
+/// A `--columns` name that is a field number: 1-based, as written
+/// (`7`); `None` for a name (and for `0`, which `--columns` refuses).
+pub(crate) fn field_number(name: &str) -> Option<usize> {
+    let name = name.trim();
+    if name.is_empty() || !name.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    name.parse::<usize>().ok().filter(|&n| n >= 1)
+}
+
+/// The indices of `--columns` (or `--accel-columns`, `option`): field
+/// numbers, or names in the header (which must then exist; `first_no` is
+/// the first data line, for the message); with the rule: [`Picked::Fields`]
+/// when all three are numbers, else [`Picked::Named`].
+fn column_indices(
+    header: Option<&[&str]>,
+    Columns(names): &Columns,
+    option: &str,
+    first_no: usize,
+    source_name: &str,
+) -> Result<([usize; 3], Picked), CliError> {
+    if let [Some(a), Some(b), Some(c)] = names.each_ref().map(|n| field_number(n)) {
+        return Ok(([a - 1, b - 1, c - 1], Picked::Fields([a, b, c])));
+    }
+    let Some(header) = header else {
+        return Err(CliError::Input(format!(
+            "{source_name}: {option} needs a header line naming the columns, \
+             but line {first_no} is data; or give their field numbers, e.g. \
+             {option} 1,2,3"
+        )));
+    };
+    let mut indices = [0; 3];
+    for (index, name) in indices.iter_mut().zip(names) {
+        *index = match field_number(name) {
+            Some(n) => n - 1,
+            None => named_indices(header, &[name.as_str(); 3], source_name)?[0],
+        };
+    }
+    Ok((indices, Picked::Named))
 }
 
 /// Whether a line's fields are the header's (a copy of the header line,
@@ -551,7 +689,10 @@ fn default_indices(
         return Err(CliError::Input(format!(
             "{source_name}: {numeric} numeric columns and no header line to choose \
              the magnetometer's x, y, z from; add a header naming the columns and \
-             pass --columns X,Y,Z, or keep only the three magnetometer columns"
+             pass --columns X,Y,Z, or pass their field numbers (from 1), e.g. \
+             --columns {},{},{numeric}",
+            numeric - 2,
+            numeric - 1,
         )));
     };
     let triples = mag_triples(header);
@@ -797,17 +938,17 @@ mod tests {
 
     #[test]
     fn three_numeric_columns_are_the_first_three_fields() {
-        // Any non-number makes the first line a header, even beyond the
-        // first three fields; later rows may hold text there.
+        // A line of three numbers and text is data: its text is ignored.
         let t = parse(b"1 2 3 text\n4 5 6 more\n7 8 9 x", None, "t").expect("parses");
-        assert_eq!(t.samples, vec![[4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
         assert_eq!(t.columns.picked, Picked::FirstThree);
-        assert_eq!(t.columns.to_string(), "1,2,3 (the first three fields)");
+        assert_eq!(t.columns.to_string(), "the first three fields");
         // A header of any names, with or without a fourth text column.
         for text in ["a,b,c\n1,2,3\n", "a,b,c,note\n1,2,3,fine\n"] {
             let t = parse(text.as_bytes(), None, "t").expect("parses");
             assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]], "{text}");
             assert_eq!(t.columns.picked, Picked::FirstThree);
+            assert_eq!(t.columns.to_string(), "a,b,c (the first three fields)");
         }
         let t = parse(b"1,2,3\n", None, "t").expect("parses");
         assert_eq!(t.columns.to_string(), "the first three fields");
@@ -815,6 +956,69 @@ mod tests {
     }
 
     #[test]
+    fn metadata_before_the_header_is_skipped() {
+        // As a phone logger writes it: sampling rate and start-up time, then
+        // the header, then the data.
+        let text = b"Fs,50.00\nInitialization time,60\nmx,my,mz\n1,2,3\n4,5,6\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(t.columns.to_string(), "mx,my,mz (the first three fields)");
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "2 lines without a magnetometer reading skipped: line 1: 'Fs,50.00'; \
+                 line 2: 'Initialization time,60'"
+            )
+        );
+        // Wide rows: the header after the metadata names the magnetometer.
+        let text = "Device: phone\nrate 50 Hz\n\nt;ax;ay;az;mx;my;mz\n0;0;0;9.8;1;2;3\n";
+        let t = parse(text.as_bytes(), None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(t.columns.picked, Picked::Header);
+        assert_eq!(t.skipped.no_reading, 2);
+        // Metadata without a header; a line cut short after the header is
+        // still an unreadable row, not the header.
+        let t = parse(b"Fs,50.00\n1,2,3\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.no_reading), (1, 1));
+        let t = parse(b"x,y,z\n4,5\n1,2,3\n", None, "t").expect("parses");
+        assert_eq!(t.columns.names, Some(["x", "y", "z"].map(String::from)));
+        assert_eq!((t.skipped.unreadable, t.skipped.no_reading), (1, 0));
+        // Copies of the header later are still copies.
+        let t = parse(b"Fs,50\nmx,my,mz\n1,2,3\nmx,my,mz\n4,5,6\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.header_copies), (2, 1));
+    }
+
+    #[test]
+    fn columns_by_field_number() {
+        // Without a header: wide rows, as a 9-axis sketch prints them.
+        let text = b"0.1,0.2,9.8,0,0,0,19,-129,174\n0.1,0.2,9.8,0,0,0,20,-130,175\n";
+        let t = parse(text, Some(&cols("7", "8", "9")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]]);
+        assert_eq!(t.columns.picked, Picked::Fields([7, 8, 9]));
+        assert_eq!(t.columns.to_string(), "fields 7,8,9 (--columns)");
+        // With a header: its names are reported; any order; mixed with names.
+        let text = b"t,mx,my,mz\n0,1,2,3\n";
+        let t = parse(text, Some(&cols("4", "2", "3")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[3.0, 1.0, 2.0]]);
+        assert_eq!(t.columns.to_string(), "mz,mx,my (fields 4,2,3, --columns)");
+        let t = parse(text, Some(&cols("mx", "3", "4")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(t.columns.picked, Picked::Named);
+        // Beyond the rows: each row is unreadable, the first is the error.
+        let err = parse(b"1,2,3\n", Some(&cols("7", "8", "9")), "t").unwrap_err();
+        assert_eq!(err.to_string(), "line 1: expected at least 9 fields, found 3");
+        // For the accelerometer too.
+        let text = b"0.1,0.2,9.8,19,-129,174\n";
+        let t = parse_with_accel(
+            text,
+            Some(&cols("4", "5", "6")),
+            Accel::Named(&cols("1", "2", "3")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
+    }
+
     fn the_usual_magnetometer_names_are_recognised() {
         for (name, group, axis) in [
             ("mag_x", "mag?", 0),

@@ -11,7 +11,7 @@ use serde_json::{json, Value};
 use crate::apply::number;
 use crate::cli::{ApplyArgs, Format, PlanarArgs, Precision, MAX_WINDOW};
 use crate::error::{one_line, CliError};
-use crate::input::{self, Picked, Source};
+use crate::input::{self, Source};
 use crate::selection::DropCounts;
 
 /// Runs `magcal planar`.
@@ -34,7 +34,7 @@ pub fn run(args: &PlanarArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErr
     // As `magcal fit`: where the text does not say which columns were read;
     // and the lines that were no samples.
     Ok(
-        (args.format == Format::Json && table.columns.picked == Picked::Header)
+        (args.format == Format::Json && table.columns.detected())
             .then(|| format!("columns {}", table.columns))
             .into_iter()
             .chain(table.skipped.note().map(|s| format!("input: {s}")))
@@ -193,7 +193,7 @@ pub fn apply(
         ));
     }
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
-    Ok((table.columns.picked == Picked::Header)
+    Ok((table.columns.detected())
         .then(|| format!("columns {}", table.columns))
         .into_iter()
         .chain(table.skipped.note().map(|s| format!("input: {s}")))
