@@ -502,7 +502,11 @@ pub struct Columns(pub [String; 3]);
 pub fn parse_columns(text: &str) -> Result<Columns, String> {
     let names: Vec<String> = text.split(',').map(|s| s.trim().to_owned()).collect();
     match <[String; 3]>::try_from(names) {
-        Ok(names) if names.iter().any(|n| n.bytes().all(|b| b == b'0') && !n.is_empty()) => {
+        Ok(names)
+            if names
+                .iter()
+                .any(|n| n.bytes().all(|b| b == b'0') && !n.is_empty()) =>
+        {
             Err("field numbers count from 1, e.g. 7,8,9".into())
         }
         Ok(names) if names.iter().all(|n| !n.is_empty()) => Ok(Columns(names)),

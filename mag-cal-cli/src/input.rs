@@ -1,17 +1,44 @@
 //! Reading the input and parsing it into samples.
 //!
-//! The format is deliberately loose, to take what loggers write:
+//! The format is deliberately loose, to take what loggers write. One
+//! detection step on the first content lines picks one of three readers:
+//! a MotionCal log, labelled values, or a table; then every line is read
+//! by that reader.
 //!
 //! - one sample per line; `\n`, `\r\n` or `\r` line ends; a UTF-8 byte-order mark
 //!   is ignored, invalid UTF-8 is decoded lossily (and then fails to parse
 //!   as a number, naming its line);
 //! - blank lines and lines starting with `#` are skipped;
-//! - the separator is chosen from the first remaining line: `;` if it holds
-//!   one, else `,`, else runs of spaces and tabs. Fields are trimmed and may
-//!   be wrapped in double quotes;
-//! - that first line is a header when any of its fields is not a number;
-//! - with `--columns` the named header fields are x, y, z (case-insensitive),
-//!   and only they have to be numbers;
+//! - a MotionCal log (one of the first ten content lines starts with
+//!   `Raw:`, after a sketch's banner, say: the
+//!   serial output of PJRC's and Adafruit's calibration sketches,
+//!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
+//!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
+//!   accelerometer from fields 1-3; its other lines (`Uni:`, `Cal1:`, ...)
+//!   are skipped, and a `Raw:` line that is cut short or garbled (a serial
+//!   line caught mid-way) becomes a non-finite row, which the fit drops and
+//!   counts;
+//! - labelled values (one of the first [`SNIFF_LINES`] content lines holds
+//!   an x, y, z named by labels: `Mx 19 My -129 Mz 174`, `Mag X: 12.3 Y:
+//!   -4.5 Z: 6.7 uT`, `ax=.. mx=.. my=.. mz=..`, `Acc: 1 2 3 Mag: 4 5 6`,
+//!   SparkFun's `Mag (uT) [ 4, 5, 6 ]`): the magnetometer's values are
+//!   found by label or unit ([`labelled`] says how, and how `--columns`
+//!   names labels); lines without them (a banner, other sensors' lines)
+//!   are skipped and counted, a line with some of them (cut short) is a
+//!   non-finite row; no magnetometer reading among several, or several, is
+//!   an error (exit 2) that lists the readings found and how to pick one;
+//! - otherwise a table. Its first data line is the first of the first
+//!   [`SNIFF_LINES`] lines with at least three numeric fields, its
+//!   separator chosen from that line: `;` if it holds one, else `,`, else
+//!   runs of spaces and tabs. Fields are trimmed and may be wrapped in
+//!   double quotes. The header is the last line before it with at least
+//!   three fields, one of them not a number; lines before the header (or
+//!   before the data, without one) are metadata (`Fs,50.00`), skipped and
+//!   counted. Without such a data line, the first line is the header when
+//!   any of its fields is not a number;
+//! - `--columns` gives x, y, z by header name (case-insensitive) or by
+//!   1-based field number (`--columns 7,8,9`, with or without a header), and
+//!   only those fields have to be numbers;
 //! - without `--columns`, the number of numeric fields in the first data
 //!   row decides:
 //!   - at most three: the first three fields of each row are x, y, z and
@@ -22,20 +49,14 @@
 //!     `compass_x`, `HX(uT)`, bare `x`, ...; never a name containing `cal`),
 //!     and those are x, y, z. None, several, or no header at all is an
 //!     error (exit 2) that lists the header's columns and asks for
-//!     `--columns X,Y,Z`: taking the first three of many columns silently
-//!     calibrated the wrong ones (the accelerometer, in `imu_gnss_1252.csv`);
+//!     `--columns` (names, or field numbers): taking the first three of
+//!     many columns silently calibrated the wrong ones (the accelerometer,
+//!     in `imu_gnss_1252.csv`);
 //! - [`Table::columns`] says which of these rules picked the columns;
-//! - for `apply`, accelerometer columns are named by `--accel-columns` or
-//!   found in the header by their exact names ([`ACCEL_NAMES`]);
-//! - a MotionCal log (one of the first ten content lines starts with
-//!   `Raw:`, after a sketch's banner, say: the
-//!   serial output of PJRC's and Adafruit's calibration sketches,
-//!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
-//!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
-//!   accelerometer from fields 1-3; its other lines (`Uni:`, `Cal1:`, ...)
-//!   are skipped, and a `Raw:` line that is cut short or garbled (a serial
-//!   line caught mid-way) becomes a non-finite row, which the fit drops and
-//!   counts;
+//! - for `apply`, accelerometer columns are named (or numbered) by
+//!   `--accel-columns` or found in the header by their exact names
+//!   ([`ACCEL_NAMES`]; in labelled lines, values so named on the
+//!   magnetometer's line);
 //! - `nan`, `inf`, `-inf` and overflowing literals such as `1e400` are read
 //!   as non-finite numbers, which the core skips and counts as dropped;
 //!   finite but absurd values such as `1e308` are passed to the core as
@@ -55,7 +76,7 @@ use std::path::{Path, PathBuf};
 use crate::cli::Columns;
 use crate::error::CliError;
 
-mod labelled;
+pub mod labelled;
 
 /// Where the samples come from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -505,9 +526,9 @@ fn delimited(
     };
     let accel_indices = match (accel, header) {
         (Accel::None, _) | (Accel::Detect, None) => None,
-        (Accel::Named(columns), _) => Some(
-            column_indices(header, columns, "--accel-columns", first_no, source_name)?.0,
-        ),
+        (Accel::Named(columns), _) => {
+            Some(column_indices(header, columns, "--accel-columns", first_no, source_name)?.0)
+        }
         (Accel::Detect, Some(header)) => ACCEL_NAMES
             .iter()
             .find_map(|names| named_indices(header, names, source_name).ok())
@@ -940,7 +961,10 @@ mod tests {
     fn three_numeric_columns_are_the_first_three_fields() {
         // A line of three numbers and text is data: its text is ignored.
         let t = parse(b"1 2 3 text\n4 5 6 more\n7 8 9 x", None, "t").expect("parses");
-        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(
+            t.samples,
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+        );
         assert_eq!(t.columns.picked, Picked::FirstThree);
         assert_eq!(t.columns.to_string(), "the first three fields");
         // A header of any names, with or without a fourth text column.
@@ -993,7 +1017,10 @@ mod tests {
         // Without a header: wide rows, as a 9-axis sketch prints them.
         let text = b"0.1,0.2,9.8,0,0,0,19,-129,174\n0.1,0.2,9.8,0,0,0,20,-130,175\n";
         let t = parse(text, Some(&cols("7", "8", "9")), "t").expect("parses");
-        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]]);
+        assert_eq!(
+            t.samples,
+            vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]]
+        );
         assert_eq!(t.columns.picked, Picked::Fields([7, 8, 9]));
         assert_eq!(t.columns.to_string(), "fields 7,8,9 (--columns)");
         // With a header: its names are reported; any order; mixed with names.
@@ -1006,7 +1033,10 @@ mod tests {
         assert_eq!(t.columns.picked, Picked::Named);
         // Beyond the rows: each row is unreadable, the first is the error.
         let err = parse(b"1,2,3\n", Some(&cols("7", "8", "9")), "t").unwrap_err();
-        assert_eq!(err.to_string(), "line 1: expected at least 9 fields, found 3");
+        assert_eq!(
+            err.to_string(),
+            "line 1: expected at least 9 fields, found 3"
+        );
         // For the accelerometer too.
         let text = b"0.1,0.2,9.8,19,-129,174\n";
         let t = parse_with_accel(
@@ -1019,6 +1049,7 @@ mod tests {
         assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
     }
 
+    #[test]
     fn the_usual_magnetometer_names_are_recognised() {
         for (name, group, axis) in [
             ("mag_x", "mag?", 0),
@@ -1239,6 +1270,277 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(msg.contains("(columns: a\\u{1b}, b, c, d)"), "{msg}");
+    }
+
+    /// The samples, column line and note of a labelled log.
+    fn labelled(text: &str) -> (Vec<[f64; 3]>, String, Option<String>) {
+        let t = parse(text.as_bytes(), None, "t").expect(text);
+        (t.samples, t.columns.to_string(), t.skipped.note())
+    }
+
+    #[test]
+    fn labelled_lines_of_one_sensor() {
+        let want = vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]];
+        for (text, columns) in [
+            (
+                "Mx 19 My -129 Mz 174\nMx 20 My -130 Mz 175\n",
+                "Mx,My,Mz (labelled values)",
+            ),
+            (
+                "X: 19  Y: -129  Z: 174  uT\nX: 20  Y: -130  Z: 175  uT\n",
+                "X (uT),Y (uT),Z (uT) (labelled values)",
+            ),
+            (
+                "Mag X: 19 Y: -129 Z: 174 uTesla\nMag X: 20 Y: -130 Z: 175 uTesla\n",
+                "Mag X (uTesla),Mag Y (uTesla),Mag Z (uTesla) (labelled values)",
+            ),
+            (
+                "mag_x=19, mag_y=-129, mag_z=174\nmag_x=20, mag_y=-130, mag_z=175\n",
+                "mag_x,mag_y,mag_z (labelled values)",
+            ),
+            // A bare X, Y, Z without a unit, when the lines hold nothing else.
+            (
+                "X: 19 Y: -129 Z: 174\nX: 20 Y: -130 Z: 175\n",
+                "X,Y,Z (labelled values)",
+            ),
+        ] {
+            let (samples, shown, note) = labelled(text);
+            assert_eq!(samples, want, "{text}");
+            assert_eq!(shown, columns, "{text}");
+            assert_eq!(note, None, "{text}");
+        }
+    }
+
+    #[test]
+    fn labelled_lines_of_several_sensors_give_the_magnetometer() {
+        let want = vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]];
+        for (text, columns, skipped) in [
+            // Adafruit's ICM-20948 example: a banner, then one line per sensor.
+            (
+                "Adafruit ICM20948 test!\nICM20948 Found!\nAccelerometer range set to: +-4G\n\
+                 Magnetometer data rate set to: 100 Hz\n\
+                 \t\tTemperature 25.50 deg C\n\
+                 \t\tAccel X: 0.10 \tY: 0.20 \tZ: 9.80 m/s^2 \n\
+                 \t\tGyro X: 0.01 \tY: 0.02 \tZ: 0.03 radians/s \n\n\
+                 \t\tMag X: 19 \tY: -129 \tZ: 174 uT\n\
+                 \t\tAccel X: 0.10 \tY: 0.20 \tZ: 9.80 m/s^2 \n\
+                 \t\tMag X: 20 \tY: -130 \tZ: 175 uT\n",
+                "Mag X (uT),Mag Y (uT),Mag Z (uT) (labelled values)",
+                8,
+            ),
+            // One line: the m of mx names the magnetometer.
+            (
+                "ax=0.1 ay=0.2 az=9.8 gx=0 gy=0 gz=0 mx=19 my=-129 mz=174\n\
+                 ax=0.1 ay=0.2 az=9.8 gx=0 gy=0 gz=0 mx=20 my=-130 mz=175\n",
+                "mx,my,mz (labelled values)",
+                0,
+            ),
+            (
+                "Acc: 0.1 0.2 9.8 Gyro: 0 0 0 Mag: 19 -129 174\n\
+                 Acc: 0.1 0.2 9.8 Gyro: 0 0 0 Mag: 20 -130 175\n",
+                "Mag x,Mag y,Mag z (labelled values)",
+                0,
+            ),
+            // SparkFun's ICM-20948 example.
+            (
+                "Scaled. Acc (mg) [ -00012.21,  00004.39,  01008.79 ], Gyr (DPS) [ -00000.11, \
+                 00000.53, -00000.08 ], Mag (uT) [  00019.00, -00129.00,  00174.00 ], Tmp (C) [ \
+                 00029.03 ]\n\
+                 Scaled. Acc (mg) [ -00012.21,  00004.39,  01008.79 ], Gyr (DPS) [ -00000.11, \
+                 00000.53, -00000.08 ], Mag (uT) [  00020.00, -00130.00,  00175.00 ], Tmp (C) [ \
+                 00029.03 ]\n",
+                "Mag x (uT),Mag y (uT),Mag z (uT) (labelled values)",
+                0,
+            ),
+            // Kris Winer's MPU-9250 sketch: mg is the accelerometer's milli-g,
+            // mG the magnetometer's milligauss.
+            (
+                "ax = 12 ay = 4 az = 1000 mg\ngx = 0.1 gy = 0.2 gz = 0.3 deg/s\n\
+                 mx = 19 my = -129 mz = 174 mG\nq0 = 1 qx = 0 qy = 0 qz = 0\n\
+                 ax = 12 ay = 4 az = 1000 mg\nmx = 20 my = -130 mz = 175 mG\n",
+                "mx (mG),my (mG),mz (mG) (labelled values)",
+                4,
+            ),
+            // Adafruit's LIS3MDL example: raw counts, then uTesla; the unit
+            // decides.
+            (
+                "X:  1900 \tY:  -12900 \tZ:  17400\n\tX: 19 \tY: -129 \tZ: 174 uTesla \n\
+                 X:  2000 \tY:  -13000 \tZ:  17500\n\tX: 20 \tY: -130 \tZ: 175 uTesla \n",
+                "X (uTesla),Y (uTesla),Z (uTesla) (labelled values)",
+                2,
+            ),
+        ] {
+            let t = parse(text.as_bytes(), None, "t").expect(text);
+            assert_eq!(t.samples, want, "{text}");
+            assert_eq!(t.columns.to_string(), columns, "{text}");
+            assert_eq!(t.columns.picked, Picked::Labels);
+            assert!(t.columns.detected());
+            assert_eq!(
+                (t.skipped.no_reading, t.skipped.unreadable),
+                (skipped, 0),
+                "{text}"
+            );
+        }
+        // The note names the lines skipped.
+        let (_, _, note) = labelled("Accel X: 1 Y: 2 Z: 3 m/s^2\nMag X: 19 Y: -129 Z: 174 uT\n");
+        assert_eq!(
+            note.as_deref(),
+            Some(
+                "1 line without a magnetometer reading skipped: line 1: 'Accel X: 1 Y: 2 Z: 3 \
+                 m/s^2'"
+            )
+        );
+    }
+
+    #[test]
+    fn a_labelled_line_cut_short_is_an_unreadable_row() {
+        let t = parse(
+            b"Mag X: 19 Y: -129 Z: 174 uT\nMag X: 20 Y: -1\nMag X: 21 Y: -131 Z: 176 uT\n",
+            None,
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples.len(), 3);
+        assert!(t.samples[1].iter().all(|v| v.is_nan()));
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "1 unreadable line kept as a non-finite row (dropped): line 2: no value \
+                 named 'magz'"
+            )
+        );
+    }
+
+    #[test]
+    fn ambiguous_labelled_lines_are_refused_with_what_was_found() {
+        // No magnetometer by label or unit.
+        let err = parse(
+            b"Accel X: 1 Y: 2 Z: 3 m/s^2\nGyro X: 1 Y: 2 Z: 3 dps\n",
+            None,
+            "f.txt",
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.txt: labelled values, but none is the magnetometer's by its label (Mag, M, \
+             mx, ...) or unit (uT, gauss, mG): found Accel X, Accel Y, Accel Z (m/s^2); Gyro \
+             X, Gyro Y, Gyro Z (dps); pass --columns with the three labels to use (e.g. \
+             --columns accelx,accely,accelz) or their numbers in the line (e.g. --columns \
+             1,2,3)"
+        );
+        assert_eq!(err.exit_code(), 2);
+        // Two bare triples: which is which is not said.
+        let err = parse(b"X: 1 Y: 2 Z: 3\nX: 1 Y: 2 Z: 3 m/s^2\n", None, "f").unwrap_err();
+        assert!(
+            err.to_string().contains("found X, Y, Z; X, Y, Z (m/s^2)"),
+            "{err}"
+        );
+        // Two magnetometers.
+        let err = parse(
+            b"Mag X: 1 Y: 2 Z: 3 uT\nmx = 1 my = 2 mz = 3 mG\n",
+            None,
+            "f.txt",
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.txt: labelled values with 2 magnetometer readings: Mag X, Mag Y, Mag Z (uT); \
+             mx, my, mz (mG); pass --columns with the labels of the one to use (e.g. \
+             --columns magx,magy,magz)"
+        );
+        assert_eq!(err.exit_code(), 2);
+        // The same labels in two field units: the unit picks.
+        let err = parse(b"X: 1 Y: 2 Z: 3 uT\nX: 1 Y: 2 Z: 3 gauss\n", None, "f").unwrap_err();
+        assert!(
+            err.to_string()
+                .ends_with("(e.g. --columns x[uT],y[uT],z[uT])"),
+            "{err}"
+        );
+        let t = parse(
+            b"X: 1 Y: 2 Z: 3 uT\nX: 1 Y: 2 Z: 3 gauss\n",
+            Some(&cols("x[gauss]", "y[gauss]", "z[gauss]")),
+            "f",
+        )
+        .expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.no_reading), (1, 1));
+    }
+
+    #[test]
+    fn columns_pick_labelled_values() {
+        let text =
+            b"Accel X: 1 Y: 2 Z: 3 m/s^2\nGyro X: 4 Y: 5 Z: 6 dps\nAccel X: 7 Y: 8 Z: 9 m/s^2\n";
+        // By label: the line's sensor word and axis, compacted.
+        let t = parse(text, Some(&cols("accelx", "Accel Y", "accel_z")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(t.columns.picked, Picked::Named);
+        assert_eq!(
+            t.columns.to_string(),
+            "Accel X (m/s^2),Accel Y (m/s^2),Accel Z (m/s^2) (--columns)"
+        );
+        assert_eq!(t.skipped.no_reading, 1);
+        // By the numbers' places in each line.
+        let text = b"ax=1 ay=2 az=3 gx=4 gy=5 gz=6 mx=7 my=8 mz=9\nax=1 ay=2\n";
+        let t = parse(text, Some(&cols("7", "8", "9")), "t").expect("parses");
+        assert_eq!(t.samples[0], [7.0, 8.0, 9.0]);
+        assert!(t.samples[1][0].is_nan());
+        assert_eq!(t.columns.to_string(), "mx,my,mz (fields 7,8,9, --columns)");
+        assert_eq!(
+            t.skipped.examples,
+            ["line 2: 2 numbers, expected at least 9"]
+        );
+        // A unit in brackets picks one of two readings of the same labels
+        // (the report's names are what --columns takes).
+        let text = b"X: 1900 Y: -12900 Z: 17400\nX: 19 Y: -129 Z: 174 uTesla\n";
+        let t = parse(
+            text,
+            Some(&cols("X (uTesla)", "Y (uTesla)", "Z (uTesla)")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        let t = parse(
+            text,
+            Some(&cols("x[uTesla]", "y[uTesla]", "z[uTesla]")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        // Without the unit they would mix: refused.
+        let err = parse(text, Some(&cols("x", "y", "z")), "f").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f: the values named 'x', 'y', 'z' come in 2 units (no unit, uTesla); add the \
+             unit to each name (e.g. --columns x[uTesla],y[uTesla],z[uTesla])"
+        );
+        // Absent names: the labels of a line.
+        let err = parse(text, Some(&cols("mx", "my", "mz")), "f").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f: no line holds values named 'mx', 'my', 'mz' (line 1 has: X, Y, Z)"
+        );
+    }
+
+    #[test]
+    fn labelled_accelerometer_values() {
+        let text = b"t=1 ax=0.1 ay=0.2 az=9.8 mx=19 my=-129 mz=174\n";
+        let t = parse_with_accel(text, None, Accel::Detect, "t").expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
+        let t =
+            parse_with_accel(text, None, Accel::Named(&cols("2", "3", "4")), "t").expect("parses");
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
+        // On other lines than the magnetometer's: none detected; named, an error.
+        let text = b"Accel X: 0.1 Y: 0.2 Z: 9.8 m/s^2\nMag X: 19 Y: -129 Z: 174 uT\n";
+        let t = parse_with_accel(text, None, Accel::Detect, "t").expect("parses");
+        assert_eq!(t.accel, None);
+        let err = parse_with_accel(
+            text,
+            None,
+            Accel::Named(&cols("accelx", "accely", "accelz")),
+            "f",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("--accel-columns"), "{err}");
     }
 
     #[test]

@@ -33,13 +33,11 @@ pub fn run(args: &PlanarArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErr
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
     // As `magcal fit`: where the text does not say which columns were read;
     // and the lines that were no samples.
-    Ok(
-        (args.format == Format::Json && table.columns.detected())
-            .then(|| format!("columns {}", table.columns))
-            .into_iter()
-            .chain(table.skipped.note().map(|s| format!("input: {s}")))
-            .collect(),
-    )
+    Ok((args.format == Format::Json && table.columns.detected())
+        .then(|| format!("columns {}", table.columns))
+        .into_iter()
+        .chain(table.skipped.note().map(|s| format!("input: {s}")))
+        .collect())
 }
 
 /// The output of a fit in precision `T`, aligned as `--align` asks.
