@@ -17,9 +17,9 @@ use mag_cal_core::{LsVariant, Method};
 const AFTER_HELP: &str = "\
 Input: CSV or whitespace/tab/semicolon separated text, one sample per line,
 '-' for stdin. Lines starting with '#' and blank lines are skipped. The first
-line with three numeric fields is data; the line before it is the header when
-one of its fields is not a number, and lines before that (metadata such as
-'Fs,50.00') are skipped.
+line with three numeric fields is data; the last line before it with three
+fields, one not a number, is the header, and lines before that (metadata such
+as 'Fs,50.00') are skipped.
 Columns: --columns X,Y,Z picks x, y, z by header name (case-insensitive) or
 by field number from 1 (--columns 7,8,9, with or without a header).
 Without it, rows of at most three numeric fields give x, y, z from the first
@@ -37,7 +37,7 @@ are the values labelled so (Mag, M, mx, mag_x, ...) or in a field's unit
 without them (other sensors, a banner) are skipped and counted. Several or
 none: exit 2, listing what was found. --columns names labels ('Mag X:' is
 magx, 'Mx' is mx, 'Mag (uT) [a, b, c]' is magx,magy,magz; a unit may follow
-in brackets: 'x (uT)') or the numbers' places in the line (--columns 7,8,9).
+in brackets: x[uT]) or the numbers' places in the line (--columns 7,8,9).
 MotionCal logs (lines 'Raw:ax,ay,az,gx,gy,gz,mx,my,mz', as PJRC's and
 Adafruit's calibration sketches print them; magnetometer at 10 per uT) are
 recognised by a Raw: line among the first ten (after a banner, say): x, y, z

@@ -26,17 +26,26 @@
 //! - unit words (`uT`, `m/s^2`, `(mg)`, [`UNITS`]) are no names: after a
 //!   number they are its unit, after a group's name the group's.
 //!
-//! The name compared with `--columns` is the sensor's and the axis letter,
-//! compacted as header names are (lower case, without `_ - .` and spaces):
+//! `--columns` with three numbers picks the line's n-th numbers (from 1),
+//! else it takes three names. A number's name is its sensor's and the axis
+//! letter, compacted as header names are (lower case, without `_ - .` and
+//! spaces):
 //! `Mag X:` is `magx`, `Mx` is `mx`, `Mag (uT) [a, b, c]` is `magx, magy,
 //! magz`, a bare `X:` is `x`; numbers without an axis are named by their
-//! label (`Tmp (C) [ 25 ]` is `tmp`). An x, y, z of one sensor on one line
-//! is a reading; its kind is its three names and unit.
+//! label (`Tmp (C) [ 25 ]` is `tmp`); a unit in brackets after a name
+//! (`x[uT]`, `x (uT)`) must match too. An x, y, z of one sensor on one
+//! line is a reading; its kind is its three names and unit.
+//!
+//! A line that holds the chosen values is a sample; one that holds some of
+//! them (a serial line cut short) a non-finite row, which the fit drops and
+//! counts; any other line (a banner, another sensor's line, the same labels
+//! in another unit) is skipped and counted.
 //!
 //! Which reading is the magnetometer's, from the first
 //! [`SNIFF_LINES`](super::SNIFF_LINES) lines: the one kind whose sensor
-//! words name a magnetometer ([`MAG_STEMS`]: `Mag`, `M`, `Magnetometer`,
-//! `mx`, ...; never a word containing `cal`) or whose unit is a magnetic
+//! words name a magnetometer (the stems of [`mag_axis`](super::mag_axis):
+//! `Mag`, `M`, `Magnetometer`, `mx`, ...; never a word containing `cal`)
+//! or whose unit is a magnetic
 //! field's ([`MAG_UNITS`]: `uT`, `gauss`, `mG`, ...); when no kind says so
 //! and the lines hold a single kind, a bare `X: Y: Z:` without a unit, that
 //! one. Anything else (no kind, several) is refused, listing the kinds found
@@ -208,7 +217,7 @@ fn axis_word(word: &str) -> Option<(&str, usize)> {
 }
 
 /// Whether the sensor words name a raw magnetometer: one of them, compacted
-/// and without a leading or trailing `raw`, is a [`MAG_STEMS`] stem other
+/// and without a leading or trailing `raw`, is a `MAG_STEMS` stem other
 /// than the empty one, and none contains `cal`.
 fn names_magnetometer(words: &str) -> bool {
     let words: Vec<String> = words.split(' ').map(compact).collect();
@@ -609,10 +618,10 @@ impl Pick {
 
 /// Whether `line` holds a labelled reading that makes the input a
 /// labelled log: an x, y, z named by axis words, or a group of three named
-/// by a sensor word ([`MAG_STEMS`], or an accelerometer's or gyroscope's:
+/// by a sensor word (a magnetometer stem, or an accelerometer's or gyroscope's:
 /// a CSV row such as `2024-01-01,1,2,3` or `NoFix,1,2,3` is no reading).
 pub fn holds_reading(line: &str) -> bool {
-    const OTHER_SENSORS: [&str; 8] = [
+    const OTHER_SENSORS: [&str; 7] = [
         "acc",
         "accel",
         "acceleration",
@@ -620,7 +629,6 @@ pub fn holds_reading(line: &str) -> bool {
         "gyr",
         "gyro",
         "gyroscope",
-        "gy",
     ];
     let values = values(line);
     readings(&values).iter().any(|&[x, _, _]| {
