@@ -13,7 +13,7 @@ use serde_json::Value;
 
 use crate::cli::{ApplyArgs, Precision, MAX_WINDOW};
 use crate::error::{one_line, CliError};
-use crate::input::{self, Accel, Picked, Source};
+use crate::input::{self, Accel, Source};
 use crate::selection::{class_name, SelectionJson};
 
 /// Runs `magcal apply`, writing the CSV to `out`.
@@ -101,7 +101,7 @@ pub fn run(args: &ApplyArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErro
     if let Some(skipped) = table.skipped.note() {
         notes.insert(0, format!("input: {skipped}"));
     }
-    if table.columns.picked == Picked::Header {
+    if table.columns.detected() {
         notes.insert(0, format!("columns {}", table.columns));
     }
     Ok(notes)

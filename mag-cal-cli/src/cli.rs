@@ -17,8 +17,11 @@ use mag_cal_core::{LsVariant, Method};
 const AFTER_HELP: &str = "\
 Input: CSV or whitespace/tab/semicolon separated text, one sample per line,
 '-' for stdin. Lines starting with '#' and blank lines are skipped. The first
-other line is a header when any of its fields is not a number.
-Columns: --columns X,Y,Z picks x, y, z by header name (case-insensitive).
+line with three numeric fields is data; the last line before it with three
+fields, one not a number, is the header, and lines before that (metadata such
+as 'Fs,50.00') are skipped.
+Columns: --columns X,Y,Z picks x, y, z by header name (case-insensitive) or
+by field number from 1 (--columns 7,8,9, with or without a header).
 Without it, rows of at most three numeric fields give x, y, z from the first
 three fields; wider rows need a header naming exactly one raw magnetometer
 triple, which is then used (and named in the report, or on stderr): magx,
@@ -26,6 +29,15 @@ mag_x, MagX, mag.x, mx, m_x, mag_x_raw, raw_mag_x, magnetometer_x, compass_x,
 HX(uT), x, ... (case, '_', '-', '.', spaces and a trailing unit in brackets
 are ignored; names containing 'cal' are calibrated columns, never picked).
 No such triple, several, or no header: exit 2, listing the header's columns.
+Labelled values, as sketches print them ('Mx 19 My -129 Mz 174',
+'Mag X: 12.3 Y: -4.5 Z: 6.7 uT', 'ax=.. ay=.. mx=.. my=.. mz=..',
+'Acc: 1 2 3 Mag: 4 5 6', 'Mag (uT) [ 4, 5, 6 ]'): the magnetometer's x, y, z
+are the values labelled so (Mag, M, mx, mag_x, ...) or in a field's unit
+(uT, gauss, mG); a bare 'X: Y: Z:' when the lines hold nothing else. Lines
+without them (other sensors, a banner) are skipped and counted. Several or
+none: exit 2, listing what was found. --columns names labels ('Mag X:' is
+magx, 'Mx' is mx, 'Mag (uT) [a, b, c]' is magx,magy,magz; a unit may follow
+in brackets: x[uT]) or the numbers' places in the line (--columns 7,8,9).
 MotionCal logs (lines 'Raw:ax,ay,az,gx,gy,gz,mx,my,mz', as PJRC's and
 Adafruit's calibration sketches print them; magnetometer at 10 per uT) are
 recognised by a Raw: line among the first ten (after a banner, say): x, y, z
@@ -113,9 +125,9 @@ pub struct FitArgs {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
 
-    /// Header names of the x, y, z columns, e.g. magx,magy,magz (default: the
-    /// first three fields, or in wider rows the magnetometer columns the
-    /// header names; see below)
+    /// The x, y, z columns: header names or labels (magx,magy,magz), or field
+    /// numbers from 1 (7,8,9) (default: the first three fields, or in wider
+    /// rows the magnetometer columns the header names; see below)
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 
@@ -203,7 +215,8 @@ pub struct OffsetsArgs {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
 
-    /// Magnetometer columns by header name
+    /// Magnetometer columns: header names or labels, or field numbers from 1
+    /// (default: as for 'magcal fit')
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 }
@@ -233,7 +246,8 @@ pub struct PlanarArgs {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
 
-    /// Magnetometer columns by header name
+    /// Magnetometer columns: header names or labels, or field numbers from 1
+    /// (default: as for 'magcal fit')
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 }
@@ -286,7 +300,7 @@ pub struct BackgroundArgs {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
 
-    /// Magnetometer columns by header name
+    /// Magnetometer columns: header names or labels, or field numbers from 1
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 }
@@ -393,13 +407,13 @@ pub struct ApplyArgs {
     #[arg(value_name = "FILE")]
     pub file: PathBuf,
 
-    /// Header names of the x, y, z columns, e.g. magx,magy,magz (default: as
-    /// for 'magcal fit')
+    /// The x, y, z columns: header names or labels, or field numbers from 1
+    /// (default: as for 'magcal fit')
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_columns)]
     pub columns: Option<Columns>,
 
-    /// Header names of the accelerometer columns (default: detected from the
-    /// header); adds heading columns
+    /// The accelerometer columns: header names or labels, or field numbers
+    /// from 1 (default: detected from the header); adds heading columns
     #[arg(long, value_name = "AX,AY,AZ", value_parser = parse_columns)]
     pub accel_columns: Option<Columns>,
 
@@ -533,17 +547,29 @@ pub enum Format {
     Json,
 }
 
-/// `--columns`: three header names, x, y, z in that order.
+/// `--columns`: three header names, labels or 1-based field numbers
+/// (digits only), x, y, z in that order.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Columns(pub [String; 3]);
 
 /// Parses `X,Y,Z` into three non-empty, trimmed names (the message says
-/// what is expected).
+/// what is expected); field numbers count from 1.
 pub fn parse_columns(text: &str) -> Result<Columns, String> {
     let names: Vec<String> = text.split(',').map(|s| s.trim().to_owned()).collect();
     match <[String; 3]>::try_from(names) {
+        Ok(names)
+            if names
+                .iter()
+                .any(|n| n.bytes().all(|b| b == b'0') && !n.is_empty()) =>
+        {
+            Err("field numbers count from 1, e.g. 7,8,9".into())
+        }
         Ok(names) if names.iter().all(|n| !n.is_empty()) => Ok(Columns(names)),
-        _ => Err("expected three comma-separated column names, e.g. magx,magy,magz".into()),
+        _ => Err(
+            "expected three comma-separated column names or field numbers, e.g. \
+             magx,magy,magz or 7,8,9"
+                .into(),
+        ),
     }
 }
 
@@ -632,6 +658,12 @@ mod tests {
         assert!(parse_columns("a,b").is_err());
         assert!(parse_columns("a,,c").is_err());
         assert!(parse_columns("a,b,c,d").is_err());
+        assert_eq!(
+            parse_columns("7, 8,9"),
+            Ok(Columns(["7".into(), "8".into(), "9".into()]))
+        );
+        assert!(parse_columns("0,1,2").is_err());
+        assert!(parse_columns("1,00,2").is_err());
     }
 
     #[test]

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use crate::cli::{FitArgs, Format, NoiseStd, Precision};
 use crate::error::CliError;
-use crate::input::{self, Picked, Source};
+use crate::input::{self, Source};
 use crate::output;
 use crate::selection::{DropCounts, SelectionJson};
 use crate::svg::{self, PlotTitle};
@@ -222,7 +222,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write) -> Result<Vec<String>, CliError>
         .and_then(|()| out.flush())
         .map_err(CliError::Write)?;
     let json = args.format == Format::Json;
-    Ok((json && table.columns.picked == Picked::Header)
+    Ok((json && table.columns.detected())
         .then(|| format!("columns {}", table.columns))
         .into_iter()
         .chain(skipped.filter(|_| json).map(|s| format!("input: {s}")))

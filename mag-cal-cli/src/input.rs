@@ -1,17 +1,44 @@
 //! Reading the input and parsing it into samples.
 //!
-//! The format is deliberately loose, to take what loggers write:
+//! The format is deliberately loose, to take what loggers write. One
+//! detection step on the first content lines picks one of three readers:
+//! a MotionCal log, labelled values, or a table; then every line is read
+//! by that reader.
 //!
 //! - one sample per line; `\n`, `\r\n` or `\r` line ends; a UTF-8 byte-order mark
 //!   is ignored, invalid UTF-8 is decoded lossily (and then fails to parse
 //!   as a number, naming its line);
 //! - blank lines and lines starting with `#` are skipped;
-//! - the separator is chosen from the first remaining line: `;` if it holds
-//!   one, else `,`, else runs of spaces and tabs. Fields are trimmed and may
-//!   be wrapped in double quotes;
-//! - that first line is a header when any of its fields is not a number;
-//! - with `--columns` the named header fields are x, y, z (case-insensitive),
-//!   and only they have to be numbers;
+//! - a MotionCal log (one of the first ten content lines starts with
+//!   `Raw:`, after a sketch's banner, say: the
+//!   serial output of PJRC's and Adafruit's calibration sketches,
+//!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
+//!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
+//!   accelerometer from fields 1-3; its other lines (`Uni:`, `Cal1:`, ...)
+//!   are skipped, and a `Raw:` line that is cut short or garbled (a serial
+//!   line caught mid-way) becomes a non-finite row, which the fit drops and
+//!   counts;
+//! - labelled values (one of the first [`SNIFF_LINES`] content lines holds
+//!   an x, y, z named by labels: `Mx 19 My -129 Mz 174`, `Mag X: 12.3 Y:
+//!   -4.5 Z: 6.7 uT`, `ax=.. mx=.. my=.. mz=..`, `Acc: 1 2 3 Mag: 4 5 6`,
+//!   SparkFun's `Mag (uT) [ 4, 5, 6 ]`): the magnetometer's values are
+//!   found by label or unit ([`labelled`] says how, and how `--columns`
+//!   names labels); lines without them (a banner, other sensors' lines)
+//!   are skipped and counted, a line with some of them (cut short) is a
+//!   non-finite row; no magnetometer reading among several, or several, is
+//!   an error (exit 2) that lists the readings found and how to pick one;
+//! - otherwise a table. Its first data line is the first of the first
+//!   [`SNIFF_LINES`] lines with at least three numeric fields, its
+//!   separator chosen from that line: `;` if it holds one, else `,`, else
+//!   runs of spaces and tabs. Fields are trimmed and may be wrapped in
+//!   double quotes. The header is the last line before it with at least
+//!   three fields, one of them not a number; lines before the header (or
+//!   before the data, without one) are metadata (`Fs,50.00`), skipped and
+//!   counted. Without such a data line, the first line is the header when
+//!   any of its fields is not a number;
+//! - `--columns` gives x, y, z by header name (case-insensitive) or by
+//!   1-based field number (`--columns 7,8,9`, with or without a header), and
+//!   only those fields have to be numbers;
 //! - without `--columns`, the number of numeric fields in the first data
 //!   row decides:
 //!   - at most three: the first three fields of each row are x, y, z and
@@ -22,20 +49,14 @@
 //!     `compass_x`, `HX(uT)`, bare `x`, ...; never a name containing `cal`),
 //!     and those are x, y, z. None, several, or no header at all is an
 //!     error (exit 2) that lists the header's columns and asks for
-//!     `--columns X,Y,Z`: taking the first three of many columns silently
-//!     calibrated the wrong ones (the accelerometer, in `imu_gnss_1252.csv`);
+//!     `--columns` (names, or field numbers): taking the first three of
+//!     many columns silently calibrated the wrong ones (the accelerometer,
+//!     in `imu_gnss_1252.csv`);
 //! - [`Table::columns`] says which of these rules picked the columns;
-//! - for `apply`, accelerometer columns are named by `--accel-columns` or
-//!   found in the header by their exact names ([`ACCEL_NAMES`]);
-//! - a MotionCal log (one of the first ten content lines starts with
-//!   `Raw:`, after a sketch's banner, say: the
-//!   serial output of PJRC's and Adafruit's calibration sketches,
-//!   `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` in integers, the magnetometer at 10
-//!   per uT) gives x, y, z from fields 7-9 of its `Raw:` lines and the
-//!   accelerometer from fields 1-3; its other lines (`Uni:`, `Cal1:`, ...)
-//!   are skipped, and a `Raw:` line that is cut short or garbled (a serial
-//!   line caught mid-way) becomes a non-finite row, which the fit drops and
-//!   counts;
+//! - for `apply`, accelerometer columns are named (or numbered) by
+//!   `--accel-columns` or found in the header by their exact names
+//!   ([`ACCEL_NAMES`]; in labelled lines, values so named on the
+//!   magnetometer's line);
 //! - `nan`, `inf`, `-inf` and overflowing literals such as `1e400` are read
 //!   as non-finite numbers, which the core skips and counts as dropped;
 //!   finite but absurd values such as `1e308` are passed to the core as
@@ -54,6 +75,8 @@ use std::path::{Path, PathBuf};
 
 use crate::cli::Columns;
 use crate::error::CliError;
+
+pub mod labelled;
 
 /// Where the samples come from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -222,14 +245,19 @@ pub struct Table {
 
 /// Lines of an input that were neither samples nor comments nor blank:
 /// data lines that could not be read, each kept as a non-finite row (the
-/// fit drops and counts it; `apply` keeps the row order), and copies of
-/// the header line after the first, skipped.
+/// fit drops and counts it; `apply` keeps the row order), copies of the
+/// header line after the first, skipped, and lines without a magnetometer
+/// reading, skipped.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Skipped {
     /// Data lines that could not be read.
     pub unreadable: usize,
     /// Copies of the header line after the first.
     pub header_copies: usize,
+    /// Lines without a magnetometer reading: metadata before the header
+    /// (`Fs,50.00`), a sketch's banner and other sensors' lines in a
+    /// labelled log (`Accel X: 0.1 Y: 0.2 Z: 9.8 m/s^2`).
+    pub no_reading: usize,
     /// The first [`Skipped::EXAMPLES`] of them, e.g. `line 104: 'abc' is
     /// not a number`.
     pub examples: Vec<String>,
@@ -241,13 +269,14 @@ impl Skipped {
 
     /// Whether every line was a sample, a comment or blank.
     pub fn is_empty(&self) -> bool {
-        self.unreadable == 0 && self.header_copies == 0
+        self.unreadable == 0 && self.header_copies == 0 && self.no_reading == 0
     }
 
     /// One line for a report, e.g. `2 unreadable lines kept as non-finite
-    /// rows (dropped), 1 copy of the header skipped: line 74: a copy of the
-    /// header; line 104: 'abc' is not a number; ...`; `None` when
-    /// [`Skipped::is_empty`].
+    /// rows (dropped), 1 copy of the header skipped, 2 lines without a
+    /// magnetometer reading skipped: line 1: 'Fs,50.00'; line 2:
+    /// 'Initialization time,60'; line 74: a copy of the header; ...`; `None`
+    /// when [`Skipped::is_empty`].
     pub fn note(&self) -> Option<String> {
         if self.is_empty() {
             return None;
@@ -272,7 +301,17 @@ impl Skipped {
                 )
             ));
         }
-        let total = self.unreadable + self.header_copies;
+        if self.no_reading > 0 {
+            parts.push(format!(
+                "{} skipped",
+                plural(
+                    self.no_reading,
+                    "line without a magnetometer reading",
+                    "lines without a magnetometer reading"
+                )
+            ));
+        }
+        let total = self.unreadable + self.header_copies + self.no_reading;
         let more = if total > self.examples.len() {
             "; ..."
         } else {
@@ -300,7 +339,8 @@ impl Skipped {
 /// `magx,magy,magz (from the header)`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ColumnsUsed {
-    /// The header's names of the x, y, z columns, when there is a header.
+    /// The header's names of the x, y, z columns, when there is a header;
+    /// in labelled lines, the values' labels and unit (`Mag X (uT)`).
     pub names: Option<[String; 3]>,
     /// The rule.
     pub picked: Picked,
@@ -318,6 +358,12 @@ pub enum Picked {
     Header,
     /// The magnetometer fields of MotionCal `Raw:` lines.
     MotionCal,
+    /// By 1-based field number, `--columns 7,8,9` (in labelled lines: the
+    /// line's 7th, 8th and 9th numbers).
+    Fields([usize; 3]),
+    /// The magnetometer's labelled values ([`labelled`]), without
+    /// `--columns`.
+    Labels,
 }
 
 /// The prefix of a MotionCal raw line.
@@ -335,20 +381,37 @@ fn is_motioncal(text: &str) -> bool {
         .any(|(_, line)| line.trim_start().starts_with(MOTIONCAL_PREFIX))
 }
 
+impl ColumnsUsed {
+    /// Whether the columns were found by a rule that may guess wrong (in
+    /// the header, or among labelled values), so that a report must name
+    /// them.
+    pub fn detected(&self) -> bool {
+        matches!(self.picked, Picked::Header | Picked::Labels)
+    }
+}
+
 impl fmt::Display for ColumnsUsed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let how = match self.picked {
-            Picked::FirstThree => "the first three fields",
-            Picked::Named => "--columns",
-            Picked::Header => "from the header",
-            Picked::MotionCal => "MotionCal Raw: lines, fields 7-9 (10 per uT)",
+            Picked::FirstThree => "the first three fields".to_owned(),
+            Picked::Named => "--columns".to_owned(),
+            Picked::Header => "from the header".to_owned(),
+            Picked::MotionCal => "MotionCal Raw: lines, fields 7-9 (10 per uT)".to_owned(),
+            Picked::Fields([a, b, c]) if self.names.is_some() => {
+                format!("fields {a},{b},{c}, --columns")
+            }
+            Picked::Fields([a, b, c]) => format!("fields {a},{b},{c} (--columns)"),
+            Picked::Labels => "labelled values".to_owned(),
         };
+        if let (Picked::Fields(_), None) = (self.picked, &self.names) {
+            return f.write_str(&how);
+        }
         match &self.names {
             Some(names) => {
                 let names: Vec<String> = names.iter().map(|n| excerpt(n)).collect();
                 write!(f, "{} ({how})", names.join(","))
             }
-            None => f.write_str(how),
+            None => f.write_str(&how),
         }
     }
 }
@@ -363,10 +426,10 @@ pub fn parse_with_accel(
 ) -> Result<Table, CliError> {
     let text = String::from_utf8_lossy(bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let mut lines = content_lines(text).peekable();
-    let Some((first_no, first)) = lines.next() else {
+    let lines: Vec<(usize, &str)> = content_lines(text).collect();
+    if lines.is_empty() {
         return Err(CliError::Input(format!("{source_name}: no data rows")));
-    };
+    }
     if is_motioncal(text) {
         if columns.is_some() {
             return Err(CliError::Input(format!(
@@ -380,40 +443,92 @@ pub fn parse_with_accel(
         }
         return Ok(motioncal(text, accel != Accel::None));
     }
-    let separator = Separator::detect(first);
-    let first_fields = separator.fields(first);
-    let has_header = first_fields.iter().any(|f| number(f).is_none());
-    let header = has_header.then_some(first_fields.as_slice());
-    let needs_header = |option: &str| {
-        CliError::Input(format!(
-            "{source_name}: {option} needs a header line naming the columns, \
-             but line {first_no} is data"
-        ))
-    };
+    if lines
+        .iter()
+        .take(SNIFF_LINES)
+        .any(|(_, line)| labelled::holds_reading(line))
+    {
+        return labelled::read(&lines, SNIFF_LINES, columns, accel, source_name);
+    }
+    delimited(&lines, columns, accel, source_name)
+}
 
-    let (indices, picked) = match (columns, header) {
-        (None, _) => {
-            let first_row = if has_header {
-                lines.peek().map(|&(_, line)| separator.fields(line))
-            } else {
-                Some(first_fields.clone())
-            };
-            let numeric = first_row.map_or(0, |fields| {
-                fields.iter().filter(|f| number(f).is_some()).count()
+/// How many of the first content lines decide the format: whether the
+/// lines are labelled ([`labelled`]), which labelled values are the
+/// magnetometer's, and where a table's data begin after metadata and its
+/// header. Sketches print a banner first (Adafruit's ICM-20948 example:
+/// 9 lines of settings, then 4 lines per reading, the magnetometer's on
+/// the 13th), and loggers a few lines of metadata (`Fs,50.00`).
+pub const SNIFF_LINES: usize = 40;
+
+/// The number of numeric fields of `line`, split at its own separator.
+fn numeric_fields(line: &str) -> usize {
+    let separator = Separator::detect(line);
+    separator
+        .fields(line)
+        .iter()
+        .filter(|f| number(f).is_some())
+        .count()
+}
+
+/// Reads a table: delimited fields, an optional header (after optional
+/// metadata lines), one sample per line (see the module docs).
+fn delimited(
+    lines: &[(usize, &str)],
+    columns: Option<&Columns>,
+    accel: Accel<'_>,
+    source_name: &str,
+) -> Result<Table, CliError> {
+    // The first data line has at least three numeric fields; the header is
+    // the last line before it with at least three fields, one of them not
+    // a number; lines before the header (or before the data, without one)
+    // are metadata. Without such a data line among the first, the first
+    // line is the header when one of its fields is not a number.
+    let data_at = lines
+        .iter()
+        .take(SNIFF_LINES)
+        .position(|(_, line)| numeric_fields(line) >= 3);
+    let (separator, header_at, start) = match data_at {
+        Some(data_at) => {
+            let separator = Separator::detect(lines[data_at].1);
+            let header_at = lines[..data_at].iter().rposition(|(_, line)| {
+                let fields = separator.fields(line);
+                fields.len() >= 3 && fields.iter().any(|f| number(f).is_none())
+            });
+            (separator, header_at, header_at.map_or(data_at, |h| h + 1))
+        }
+        None => {
+            let separator = Separator::detect(lines[0].1);
+            let is_header = separator
+                .fields(lines[0].1)
+                .iter()
+                .any(|f| number(f).is_none());
+            (separator, is_header.then_some(0), usize::from(is_header))
+        }
+    };
+    let header_fields = header_at.map(|h| separator.fields(lines[h].1));
+    let header = header_fields.as_deref();
+    let first_row = lines.get(data_at.unwrap_or(start));
+    let first_no = first_row.map_or(lines[0].0, |&(no, _)| no);
+
+    let (indices, picked) = match columns {
+        None => {
+            let numeric = first_row.map_or(0, |&(_, line)| {
+                separator
+                    .fields(line)
+                    .iter()
+                    .filter(|f| number(f).is_some())
+                    .count()
             });
             default_indices(header, numeric, source_name)?
         }
-        (Some(Columns(names)), Some(header)) => {
-            (named_indices(header, names, source_name)?, Picked::Named)
-        }
-        (Some(_), None) => return Err(needs_header("--columns")),
+        Some(columns) => column_indices(header, columns, "--columns", first_no, source_name)?,
     };
     let accel_indices = match (accel, header) {
         (Accel::None, _) | (Accel::Detect, None) => None,
-        (Accel::Named(Columns(names)), Some(header)) => {
-            Some(named_indices(header, names, source_name)?)
+        (Accel::Named(columns), _) => {
+            Some(column_indices(header, columns, "--accel-columns", first_no, source_name)?.0)
         }
-        (Accel::Named(_), None) => return Err(needs_header("--accel-columns")),
         (Accel::Detect, Some(header)) => ACCEL_NAMES
             .iter()
             .find_map(|names| named_indices(header, names, source_name).ok())
@@ -426,13 +541,16 @@ pub fn parse_with_accel(
         picked,
     };
 
-    let data_first = (!has_header).then_some((first_no, first));
     let mut samples = Vec::new();
     let mut accel_rows = accel_indices.map(|_| Vec::new());
     let mut skipped = Skipped::default();
+    for &(line_no, line) in &lines[..header_at.unwrap_or(start)] {
+        skipped.no_reading += 1;
+        skipped.add(|| format!("line {line_no}: '{}'", excerpt(line.trim())));
+    }
     // The first line that could not be read: the error when none could.
     let mut first_error = None;
-    for (line_no, line) in data_first.into_iter().chain(lines) {
+    for &(line_no, line) in &lines[start..] {
         let fields = separator.fields(line);
         if header.is_some_and(|h| same_fields(h, &fields)) {
             skipped.header_copies += 1;
@@ -471,6 +589,47 @@ pub fn parse_with_accel(
         columns,
         skipped,
     })
+}
+
+/// A `--columns` name that is a field number: 1-based, as written
+/// (`7`); `None` for a name (and for `0`, which `--columns` refuses).
+pub(crate) fn field_number(name: &str) -> Option<usize> {
+    let name = name.trim();
+    if name.is_empty() || !name.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    name.parse::<usize>().ok().filter(|&n| n >= 1)
+}
+
+/// The indices of `--columns` (or `--accel-columns`, `option`): field
+/// numbers, or names in the header (which must then exist; `first_no` is
+/// the first data line, for the message); with the rule: [`Picked::Fields`]
+/// when all three are numbers, else [`Picked::Named`].
+fn column_indices(
+    header: Option<&[&str]>,
+    Columns(names): &Columns,
+    option: &str,
+    first_no: usize,
+    source_name: &str,
+) -> Result<([usize; 3], Picked), CliError> {
+    if let [Some(a), Some(b), Some(c)] = names.each_ref().map(|n| field_number(n)) {
+        return Ok(([a - 1, b - 1, c - 1], Picked::Fields([a, b, c])));
+    }
+    let Some(header) = header else {
+        return Err(CliError::Input(format!(
+            "{source_name}: {option} needs a header line naming the columns, \
+             but line {first_no} is data; or give their field numbers, e.g. \
+             {option} 1,2,3"
+        )));
+    };
+    let mut indices = [0; 3];
+    for (index, name) in indices.iter_mut().zip(names) {
+        *index = match field_number(name) {
+            Some(n) => n - 1,
+            None => named_indices(header, &[name.as_str(); 3], source_name)?[0],
+        };
+    }
+    Ok((indices, Picked::Named))
 }
 
 /// Whether a line's fields are the header's (a copy of the header line,
@@ -551,7 +710,10 @@ fn default_indices(
         return Err(CliError::Input(format!(
             "{source_name}: {numeric} numeric columns and no header line to choose \
              the magnetometer's x, y, z from; add a header naming the columns and \
-             pass --columns X,Y,Z, or keep only the three magnetometer columns"
+             pass --columns X,Y,Z, or pass their field numbers (from 1), e.g. \
+             --columns {},{},{numeric}",
+            numeric - 2,
+            numeric - 1,
         )));
     };
     let triples = mag_triples(header);
@@ -797,21 +959,94 @@ mod tests {
 
     #[test]
     fn three_numeric_columns_are_the_first_three_fields() {
-        // Any non-number makes the first line a header, even beyond the
-        // first three fields; later rows may hold text there.
+        // A line of three numbers and text is data: its text is ignored.
         let t = parse(b"1 2 3 text\n4 5 6 more\n7 8 9 x", None, "t").expect("parses");
-        assert_eq!(t.samples, vec![[4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(
+            t.samples,
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+        );
         assert_eq!(t.columns.picked, Picked::FirstThree);
-        assert_eq!(t.columns.to_string(), "1,2,3 (the first three fields)");
+        assert_eq!(t.columns.to_string(), "the first three fields");
         // A header of any names, with or without a fourth text column.
         for text in ["a,b,c\n1,2,3\n", "a,b,c,note\n1,2,3,fine\n"] {
             let t = parse(text.as_bytes(), None, "t").expect("parses");
             assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]], "{text}");
             assert_eq!(t.columns.picked, Picked::FirstThree);
+            assert_eq!(t.columns.to_string(), "a,b,c (the first three fields)");
         }
         let t = parse(b"1,2,3\n", None, "t").expect("parses");
         assert_eq!(t.columns.to_string(), "the first three fields");
         assert_eq!(t.columns.names, None);
+    }
+
+    #[test]
+    fn metadata_before_the_header_is_skipped() {
+        // As a phone logger writes it: sampling rate and start-up time, then
+        // the header, then the data.
+        let text = b"Fs,50.00\nInitialization time,60\nmx,my,mz\n1,2,3\n4,5,6\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(t.columns.to_string(), "mx,my,mz (the first three fields)");
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "2 lines without a magnetometer reading skipped: line 1: 'Fs,50.00'; \
+                 line 2: 'Initialization time,60'"
+            )
+        );
+        // Wide rows: the header after the metadata names the magnetometer.
+        let text = "Device: phone\nrate 50 Hz\n\nt;ax;ay;az;mx;my;mz\n0;0;0;9.8;1;2;3\n";
+        let t = parse(text.as_bytes(), None, "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(t.columns.picked, Picked::Header);
+        assert_eq!(t.skipped.no_reading, 2);
+        // Metadata without a header; a line cut short after the header is
+        // still an unreadable row, not the header.
+        let t = parse(b"Fs,50.00\n1,2,3\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.no_reading), (1, 1));
+        let t = parse(b"x,y,z\n4,5\n1,2,3\n", None, "t").expect("parses");
+        assert_eq!(t.columns.names, Some(["x", "y", "z"].map(String::from)));
+        assert_eq!((t.skipped.unreadable, t.skipped.no_reading), (1, 0));
+        // Copies of the header later are still copies.
+        let t = parse(b"Fs,50\nmx,my,mz\n1,2,3\nmx,my,mz\n4,5,6\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.header_copies), (2, 1));
+    }
+
+    #[test]
+    fn columns_by_field_number() {
+        // Without a header: wide rows, as a 9-axis sketch prints them.
+        let text = b"0.1,0.2,9.8,0,0,0,19,-129,174\n0.1,0.2,9.8,0,0,0,20,-130,175\n";
+        let t = parse(text, Some(&cols("7", "8", "9")), "t").expect("parses");
+        assert_eq!(
+            t.samples,
+            vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]]
+        );
+        assert_eq!(t.columns.picked, Picked::Fields([7, 8, 9]));
+        assert_eq!(t.columns.to_string(), "fields 7,8,9 (--columns)");
+        // With a header: its names are reported; any order; mixed with names.
+        let text = b"t,mx,my,mz\n0,1,2,3\n";
+        let t = parse(text, Some(&cols("4", "2", "3")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[3.0, 1.0, 2.0]]);
+        assert_eq!(t.columns.to_string(), "mz,mx,my (fields 4,2,3, --columns)");
+        let t = parse(text, Some(&cols("mx", "3", "4")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(t.columns.picked, Picked::Named);
+        // Beyond the rows: each row is unreadable, the first is the error.
+        let err = parse(b"1,2,3\n", Some(&cols("7", "8", "9")), "t").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "line 1: expected at least 9 fields, found 3"
+        );
+        // For the accelerometer too.
+        let text = b"0.1,0.2,9.8,19,-129,174\n";
+        let t = parse_with_accel(
+            text,
+            Some(&cols("4", "5", "6")),
+            Accel::Named(&cols("1", "2", "3")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
     }
 
     #[test]
@@ -1035,6 +1270,277 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(msg.contains("(columns: a\\u{1b}, b, c, d)"), "{msg}");
+    }
+
+    /// The samples, column line and note of a labelled log.
+    fn labelled(text: &str) -> (Vec<[f64; 3]>, String, Option<String>) {
+        let t = parse(text.as_bytes(), None, "t").expect(text);
+        (t.samples, t.columns.to_string(), t.skipped.note())
+    }
+
+    #[test]
+    fn labelled_lines_of_one_sensor() {
+        let want = vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]];
+        for (text, columns) in [
+            (
+                "Mx 19 My -129 Mz 174\nMx 20 My -130 Mz 175\n",
+                "Mx,My,Mz (labelled values)",
+            ),
+            (
+                "X: 19  Y: -129  Z: 174  uT\nX: 20  Y: -130  Z: 175  uT\n",
+                "X (uT),Y (uT),Z (uT) (labelled values)",
+            ),
+            (
+                "Mag X: 19 Y: -129 Z: 174 uTesla\nMag X: 20 Y: -130 Z: 175 uTesla\n",
+                "Mag X (uTesla),Mag Y (uTesla),Mag Z (uTesla) (labelled values)",
+            ),
+            (
+                "mag_x=19, mag_y=-129, mag_z=174\nmag_x=20, mag_y=-130, mag_z=175\n",
+                "mag_x,mag_y,mag_z (labelled values)",
+            ),
+            // A bare X, Y, Z without a unit, when the lines hold nothing else.
+            (
+                "X: 19 Y: -129 Z: 174\nX: 20 Y: -130 Z: 175\n",
+                "X,Y,Z (labelled values)",
+            ),
+        ] {
+            let (samples, shown, note) = labelled(text);
+            assert_eq!(samples, want, "{text}");
+            assert_eq!(shown, columns, "{text}");
+            assert_eq!(note, None, "{text}");
+        }
+    }
+
+    #[test]
+    fn labelled_lines_of_several_sensors_give_the_magnetometer() {
+        let want = vec![[19.0, -129.0, 174.0], [20.0, -130.0, 175.0]];
+        for (text, columns, skipped) in [
+            // Adafruit's ICM-20948 example: a banner, then one line per sensor.
+            (
+                "Adafruit ICM20948 test!\nICM20948 Found!\nAccelerometer range set to: +-4G\n\
+                 Magnetometer data rate set to: 100 Hz\n\
+                 \t\tTemperature 25.50 deg C\n\
+                 \t\tAccel X: 0.10 \tY: 0.20 \tZ: 9.80 m/s^2 \n\
+                 \t\tGyro X: 0.01 \tY: 0.02 \tZ: 0.03 radians/s \n\n\
+                 \t\tMag X: 19 \tY: -129 \tZ: 174 uT\n\
+                 \t\tAccel X: 0.10 \tY: 0.20 \tZ: 9.80 m/s^2 \n\
+                 \t\tMag X: 20 \tY: -130 \tZ: 175 uT\n",
+                "Mag X (uT),Mag Y (uT),Mag Z (uT) (labelled values)",
+                8,
+            ),
+            // One line: the m of mx names the magnetometer.
+            (
+                "ax=0.1 ay=0.2 az=9.8 gx=0 gy=0 gz=0 mx=19 my=-129 mz=174\n\
+                 ax=0.1 ay=0.2 az=9.8 gx=0 gy=0 gz=0 mx=20 my=-130 mz=175\n",
+                "mx,my,mz (labelled values)",
+                0,
+            ),
+            (
+                "Acc: 0.1 0.2 9.8 Gyro: 0 0 0 Mag: 19 -129 174\n\
+                 Acc: 0.1 0.2 9.8 Gyro: 0 0 0 Mag: 20 -130 175\n",
+                "Mag x,Mag y,Mag z (labelled values)",
+                0,
+            ),
+            // SparkFun's ICM-20948 example.
+            (
+                "Scaled. Acc (mg) [ -00012.21,  00004.39,  01008.79 ], Gyr (DPS) [ -00000.11, \
+                 00000.53, -00000.08 ], Mag (uT) [  00019.00, -00129.00,  00174.00 ], Tmp (C) [ \
+                 00029.03 ]\n\
+                 Scaled. Acc (mg) [ -00012.21,  00004.39,  01008.79 ], Gyr (DPS) [ -00000.11, \
+                 00000.53, -00000.08 ], Mag (uT) [  00020.00, -00130.00,  00175.00 ], Tmp (C) [ \
+                 00029.03 ]\n",
+                "Mag x (uT),Mag y (uT),Mag z (uT) (labelled values)",
+                0,
+            ),
+            // Kris Winer's MPU-9250 sketch: mg is the accelerometer's milli-g,
+            // mG the magnetometer's milligauss.
+            (
+                "ax = 12 ay = 4 az = 1000 mg\ngx = 0.1 gy = 0.2 gz = 0.3 deg/s\n\
+                 mx = 19 my = -129 mz = 174 mG\nq0 = 1 qx = 0 qy = 0 qz = 0\n\
+                 ax = 12 ay = 4 az = 1000 mg\nmx = 20 my = -130 mz = 175 mG\n",
+                "mx (mG),my (mG),mz (mG) (labelled values)",
+                4,
+            ),
+            // Adafruit's LIS3MDL example: raw counts, then uTesla; the unit
+            // decides.
+            (
+                "X:  1900 \tY:  -12900 \tZ:  17400\n\tX: 19 \tY: -129 \tZ: 174 uTesla \n\
+                 X:  2000 \tY:  -13000 \tZ:  17500\n\tX: 20 \tY: -130 \tZ: 175 uTesla \n",
+                "X (uTesla),Y (uTesla),Z (uTesla) (labelled values)",
+                2,
+            ),
+        ] {
+            let t = parse(text.as_bytes(), None, "t").expect(text);
+            assert_eq!(t.samples, want, "{text}");
+            assert_eq!(t.columns.to_string(), columns, "{text}");
+            assert_eq!(t.columns.picked, Picked::Labels);
+            assert!(t.columns.detected());
+            assert_eq!(
+                (t.skipped.no_reading, t.skipped.unreadable),
+                (skipped, 0),
+                "{text}"
+            );
+        }
+        // The note names the lines skipped.
+        let (_, _, note) = labelled("Accel X: 1 Y: 2 Z: 3 m/s^2\nMag X: 19 Y: -129 Z: 174 uT\n");
+        assert_eq!(
+            note.as_deref(),
+            Some(
+                "1 line without a magnetometer reading skipped: line 1: 'Accel X: 1 Y: 2 Z: 3 \
+                 m/s^2'"
+            )
+        );
+    }
+
+    #[test]
+    fn a_labelled_line_cut_short_is_an_unreadable_row() {
+        let t = parse(
+            b"Mag X: 19 Y: -129 Z: 174 uT\nMag X: 20 Y: -1\nMag X: 21 Y: -131 Z: 176 uT\n",
+            None,
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples.len(), 3);
+        assert!(t.samples[1].iter().all(|v| v.is_nan()));
+        assert_eq!(
+            t.skipped.note().as_deref(),
+            Some(
+                "1 unreadable line kept as a non-finite row (dropped): line 2: no value \
+                 named 'magz'"
+            )
+        );
+    }
+
+    #[test]
+    fn ambiguous_labelled_lines_are_refused_with_what_was_found() {
+        // No magnetometer by label or unit.
+        let err = parse(
+            b"Accel X: 1 Y: 2 Z: 3 m/s^2\nGyro X: 1 Y: 2 Z: 3 dps\n",
+            None,
+            "f.txt",
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.txt: labelled values, but none is the magnetometer's by its label (Mag, M, \
+             mx, ...) or unit (uT, gauss, mG): found Accel X, Accel Y, Accel Z (m/s^2); Gyro \
+             X, Gyro Y, Gyro Z (dps); pass --columns with the three labels to use (e.g. \
+             --columns accelx,accely,accelz) or their numbers in the line (e.g. --columns \
+             1,2,3)"
+        );
+        assert_eq!(err.exit_code(), 2);
+        // Two bare triples: which is which is not said.
+        let err = parse(b"X: 1 Y: 2 Z: 3\nX: 1 Y: 2 Z: 3 m/s^2\n", None, "f").unwrap_err();
+        assert!(
+            err.to_string().contains("found X, Y, Z; X, Y, Z (m/s^2)"),
+            "{err}"
+        );
+        // Two magnetometers.
+        let err = parse(
+            b"Mag X: 1 Y: 2 Z: 3 uT\nmx = 1 my = 2 mz = 3 mG\n",
+            None,
+            "f.txt",
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f.txt: labelled values with 2 magnetometer readings: Mag X, Mag Y, Mag Z (uT); \
+             mx, my, mz (mG); pass --columns with the labels of the one to use (e.g. \
+             --columns magx,magy,magz)"
+        );
+        assert_eq!(err.exit_code(), 2);
+        // The same labels in two field units: the unit picks.
+        let err = parse(b"X: 1 Y: 2 Z: 3 uT\nX: 1 Y: 2 Z: 3 gauss\n", None, "f").unwrap_err();
+        assert!(
+            err.to_string()
+                .ends_with("(e.g. --columns x[uT],y[uT],z[uT])"),
+            "{err}"
+        );
+        let t = parse(
+            b"X: 1 Y: 2 Z: 3 uT\nX: 1 Y: 2 Z: 3 gauss\n",
+            Some(&cols("x[gauss]", "y[gauss]", "z[gauss]")),
+            "f",
+        )
+        .expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.no_reading), (1, 1));
+    }
+
+    #[test]
+    fn columns_pick_labelled_values() {
+        let text =
+            b"Accel X: 1 Y: 2 Z: 3 m/s^2\nGyro X: 4 Y: 5 Z: 6 dps\nAccel X: 7 Y: 8 Z: 9 m/s^2\n";
+        // By label: the line's sensor word and axis, compacted.
+        let t = parse(text, Some(&cols("accelx", "Accel Y", "accel_z")), "t").expect("parses");
+        assert_eq!(t.samples, vec![[1.0, 2.0, 3.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(t.columns.picked, Picked::Named);
+        assert_eq!(
+            t.columns.to_string(),
+            "Accel X (m/s^2),Accel Y (m/s^2),Accel Z (m/s^2) (--columns)"
+        );
+        assert_eq!(t.skipped.no_reading, 1);
+        // By the numbers' places in each line.
+        let text = b"ax=1 ay=2 az=3 gx=4 gy=5 gz=6 mx=7 my=8 mz=9\nax=1 ay=2\n";
+        let t = parse(text, Some(&cols("7", "8", "9")), "t").expect("parses");
+        assert_eq!(t.samples[0], [7.0, 8.0, 9.0]);
+        assert!(t.samples[1][0].is_nan());
+        assert_eq!(t.columns.to_string(), "mx,my,mz (fields 7,8,9, --columns)");
+        assert_eq!(
+            t.skipped.examples,
+            ["line 2: 2 numbers, expected at least 9"]
+        );
+        // A unit in brackets picks one of two readings of the same labels
+        // (the report's names are what --columns takes).
+        let text = b"X: 1900 Y: -12900 Z: 17400\nX: 19 Y: -129 Z: 174 uTesla\n";
+        let t = parse(
+            text,
+            Some(&cols("X (uTesla)", "Y (uTesla)", "Z (uTesla)")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        let t = parse(
+            text,
+            Some(&cols("x[uTesla]", "y[uTesla]", "z[uTesla]")),
+            "t",
+        )
+        .expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        // Without the unit they would mix: refused.
+        let err = parse(text, Some(&cols("x", "y", "z")), "f").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f: the values named 'x', 'y', 'z' come in 2 units (no unit, uTesla); add the \
+             unit to each name (e.g. --columns x[uTesla],y[uTesla],z[uTesla])"
+        );
+        // Absent names: the labels of a line.
+        let err = parse(text, Some(&cols("mx", "my", "mz")), "f").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "f: no line holds values named 'mx', 'my', 'mz' (line 1 has: X, Y, Z)"
+        );
+    }
+
+    #[test]
+    fn labelled_accelerometer_values() {
+        let text = b"t=1 ax=0.1 ay=0.2 az=9.8 mx=19 my=-129 mz=174\n";
+        let t = parse_with_accel(text, None, Accel::Detect, "t").expect("parses");
+        assert_eq!(t.samples, vec![[19.0, -129.0, 174.0]]);
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
+        let t =
+            parse_with_accel(text, None, Accel::Named(&cols("2", "3", "4")), "t").expect("parses");
+        assert_eq!(t.accel, Some(vec![[0.1, 0.2, 9.8]]));
+        // On other lines than the magnetometer's: none detected; named, an error.
+        let text = b"Accel X: 0.1 Y: 0.2 Z: 9.8 m/s^2\nMag X: 19 Y: -129 Z: 174 uT\n";
+        let t = parse_with_accel(text, None, Accel::Detect, "t").expect("parses");
+        assert_eq!(t.accel, None);
+        let err = parse_with_accel(
+            text,
+            None,
+            Accel::Named(&cols("accelx", "accely", "accelz")),
+            "f",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("--accel-columns"), "{err}");
     }
 
     #[test]

@@ -23,9 +23,11 @@
 //! by the core. Every failure prints one line on stderr naming the reason
 //! (clap's usage errors start with such a line and add a usage hint). A
 //! success prints nothing on stderr, except `magcal: note: ...` lines: one
-//! `columns ...` when the sample columns were found in the header and the
-//! output does not say so (`fit --format json`, `apply`), and one for
-//! `apply --flags` with a calibration file that has no `selection`.
+//! `columns ...` when the sample columns were found in the header or among
+//! labelled values and the output does not say so (`fit --format json`,
+//! `apply`, `planar --format json`), one `input: ...` naming lines that were
+//! no samples, and one for `apply --flags` with a calibration file that has
+//! no `selection`.
 
 #![warn(missing_docs)]
 

@@ -49,13 +49,14 @@ pub fn run(args: &OffsetsArgs, out: &mut dyn Write) -> Result<Vec<String>, CliEr
             let [bx, by, bz] = cal.hard_iron();
             let [ox, oy, oz] = previous.hard_iron();
             format!(
-                "offsets-only fit of {} (soft iron of {}, field strength {})\n  \
+                "offsets-only fit of {} (columns {}; soft iron of {}, field strength {})\n  \
                  hard iron     [{bx:.4}, {by:.4}, {bz:.4}] (was [{ox:.4}, {oy:.4}, {oz:.4}])\n  \
                  field         {:.4} (ratio {:.5})\n  \
                  determinacy   {:.4}\n  \
                  rows          {} used, {} dropped, {} rejected; {} passes\n  \
                  fit error     {:.5} of the field\n",
                 source.name(),
+                table.columns,
                 cal_name,
                 args.strength.name(),
                 cal.field_strength(),

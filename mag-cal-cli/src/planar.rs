@@ -11,7 +11,7 @@ use serde_json::{json, Value};
 use crate::apply::number;
 use crate::cli::{ApplyArgs, Format, PlanarArgs, Precision, MAX_WINDOW};
 use crate::error::{one_line, CliError};
-use crate::input::{self, Picked, Source};
+use crate::input::{self, Source};
 use crate::selection::DropCounts;
 
 /// Runs `magcal planar`.
@@ -22,13 +22,11 @@ pub fn run(args: &PlanarArgs, out: &mut dyn Write) -> Result<Vec<String>, CliErr
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
     // As `magcal fit`: where the text does not say which columns were read;
     // and the lines that were no samples.
-    Ok(
-        (args.format == Format::Json && table.columns.picked == Picked::Header)
-            .then(|| format!("columns {}", table.columns))
-            .into_iter()
-            .chain(table.skipped.note().map(|s| format!("input: {s}")))
-            .collect(),
-    )
+    Ok((args.format == Format::Json && table.columns.detected())
+        .then(|| format!("columns {}", table.columns))
+        .into_iter()
+        .chain(table.skipped.note().map(|s| format!("input: {s}")))
+        .collect())
 }
 
 /// What `magcal planar` prints for samples already read, in each of
@@ -215,7 +213,7 @@ pub fn apply(
         ));
     }
     out.write_all(text.as_bytes()).map_err(CliError::Write)?;
-    Ok((table.columns.picked == Picked::Header)
+    Ok((table.columns.detected())
         .then(|| format!("columns {}", table.columns))
         .into_iter()
         .chain(table.skipped.note().map(|s| format!("input: {s}")))

@@ -5,7 +5,8 @@
 //! bytes; numbers with random separators, quoting and line ends; headers;
 //! huge, tiny and non-finite values; mixed column counts; very long lines;
 //! CRLF and lone CR; a UTF-8 BOM; UTF-16 with and without BOM; valid
-//! ellipsoid data with corruption), and a valid command line:
+//! ellipsoid data with corruption; labelled values of one or several
+//! sensors, as sketches print them), and a valid command line:
 //! `magcal fit` (every method and LS variant, both precisions, json and
 //! text, sometimes `--columns`, `--noise-std`, `--plot`, `--plain`) or
 //! `magcal apply` (a valid calibration or a corrupt one, sometimes
@@ -220,7 +221,7 @@ fn ellipsoid_rows(rng: &mut Rng, n: usize) -> Vec<String> {
 
 /// An input file of one of many shapes, and its name.
 fn input_file(rng: &mut Rng) -> (&'static str, Vec<u8>) {
-    let kind = rng.below(11);
+    let kind = rng.below(12);
     let rows = match rng.below(4) {
         0 => rng.index(12),
         1 | 2 => 10 + rng.index(200),
@@ -353,6 +354,56 @@ fn input_file(rng: &mut Rng) -> (&'static str, Vec<u8>) {
             }
             "long lines"
         }
+        // Labelled values, as sketches print them: one or several sensors,
+        // one line or one line each, units or none, some lines cut short,
+        // garbled or of another sensor, sometimes with a banner.
+        10 => {
+            const LABELS: [[&str; 3]; 8] = [
+                ["Mx ", " My ", " Mz "],
+                ["X: ", "  Y: ", "  Z: "],
+                ["Mag X: ", " \tY: ", " \tZ: "],
+                ["mag_x=", ", mag_y=", ", mag_z="],
+                ["Mag: ", " ", " "],
+                ["Mag (uT) [ ", ", ", " ]"],
+                ["Accel X: ", " Y: ", " Z: "],
+                ["ax=", " ay=", " az="],
+            ];
+            const UNITS: [&str; 7] = ["", " uT", " uTesla", " gauss", " mG", " m/s^2", " mg"];
+            if rng.chance(0.3) {
+                text.push_str("Adafruit test!\nSensor found\nrate set to: 100 Hz\n");
+            }
+            let sensors: Vec<([&str; 3], &str)> = (0..1 + rng.index(3))
+                .map(|_| (*rng.pick(&LABELS), *rng.pick(&UNITS)))
+                .collect();
+            let one_line = rng.chance(0.5);
+            for row in ellipsoid_rows(rng, rows.max(12)) {
+                let v: Vec<&str> = row.split(',').collect();
+                for (k, (labels, unit)) in sensors.iter().enumerate() {
+                    let at = if k == 0 { 0 } else { 3 };
+                    let mut line = format!(
+                        "{}{}{}{}{}{}{unit}",
+                        labels[0],
+                        v[at],
+                        labels[1],
+                        v[at + 1],
+                        labels[2],
+                        v[at + 2]
+                    );
+                    if rng.chance(0.03) {
+                        let cut = rng.index(line.len());
+                        line = line.chars().take(cut).collect();
+                    } else if rng.chance(0.02) {
+                        line = line.replace(v[at], &rng.number());
+                    }
+                    text.push_str(&line);
+                    text.push_str(if one_line { " " } else { rng.line_end() });
+                }
+                if one_line {
+                    text.push_str(rng.line_end());
+                }
+            }
+            "labelled values"
+        }
         // Valid data in another encoding or with a BOM.
         _ => {
             let rows = ellipsoid_rows(rng, rows.max(12));
@@ -475,7 +526,11 @@ fn build_run(rng: &mut Rng, dir: &std::path::Path, valid_cal: &[u8]) -> Run {
     };
     let columns = |rng: &mut Rng| -> String {
         let names: Vec<&str> = (0..3)
-            .map(|_| *rng.pick(&["x", "y", "z", "ax", "ay", "az", "magx", "q", "X"]))
+            .map(|_| {
+                *rng.pick(&[
+                    "x", "y", "z", "ax", "ay", "az", "magx", "q", "X", "1", "3", "7", "9", "40",
+                ])
+            })
             .collect();
         names.join(",")
     };
