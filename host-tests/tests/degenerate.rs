@@ -133,10 +133,7 @@ fn a_planar_circle_and_the_nearly_planar_recording_are_refused_as_planar() {
                 ..Config::default()
             },
         );
-        assert!(
-            matches!(r, Err(Error::Planar { .. })),
-            "{method:?}: {r:?}"
-        );
+        assert!(matches!(r, Err(Error::Planar { .. })), "{method:?}: {r:?}");
     }
 }
 
@@ -268,10 +265,7 @@ fn a_narrow_band_and_a_cap_are_refused_for_coverage() {
         [0.003; 3],
         &mut rng,
     );
-    assert!(matches!(
-        fit(&cap).unwrap_err(),
-        Error::PoorCoverage { .. }
-    ));
+    assert!(matches!(fit(&cap).unwrap_err(), Error::PoorCoverage { .. }));
 }
 
 #[test]

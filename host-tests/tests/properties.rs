@@ -115,7 +115,8 @@ fn pair(
             let condition = (sv.max() / sv.min()).powi(2);
             let near_limit = condition > 0.75 * REFUSE_DISTORTION;
             prop_assert!(
-                label.contains("LiGriffiths") || (matches!(a, Error::ExtremeDistortion { .. }) && near_limit),
+                label.contains("LiGriffiths")
+                    || (matches!(a, Error::ExtremeDistortion { .. }) && near_limit),
                 "{label}: both refused: {a:?} (true condition of M {condition})"
             );
             Ok(None)

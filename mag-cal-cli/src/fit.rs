@@ -111,6 +111,10 @@ pub struct Quality {
     pub skewness: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
+    /// The core's sentence of each warning, in the same order, with the
+    /// figure and the limit that raised it ([`mag_cal_core::Warning::explain`]).
+    #[serde(skip)]
+    pub warning_texts: Vec<String>,
 }
 
 /// Runs `magcal fit`, writing the report to `out`.
@@ -279,6 +283,11 @@ fn fit_in<T: Real>(
             outlier_share: report.quality.outlier_share.to_f64(),
             skewness: report.quality.skewness.to_f64(),
             warnings: report.warnings.iter().map(|w| w.name()).collect(),
+            warning_texts: report
+                .warnings
+                .iter()
+                .map(|w| w.explain(report, config).to_string())
+                .collect(),
         },
         selection: SelectionJson::from_core(&report.selection),
         classes,

@@ -79,19 +79,25 @@ pub fn text(o: &Outcome, source_name: &str, columns: &str, skipped: Option<&str>
         sig(100.0 * o.quality.outlier_share, 2),
         sig(o.quality.skewness, 2)
     );
-    // One line a warning: its name and the core's sentence for people.
+    // One line a warning: its name and the core's sentence for people,
+    // with its figure when the fit gave one.
     let warnings = if o.quality.warnings.is_empty() {
         "none".to_owned()
     } else {
         o.quality
             .warnings
             .iter()
-            .map(
-                |name| match Warning::ALL.into_iter().find(|w| w.name() == *name) {
-                    Some(w) => format!("{name}: {w}"),
-                    None => (*name).to_owned(),
-                },
-            )
+            .enumerate()
+            .map(|(i, name)| {
+                match (
+                    o.quality.warning_texts.get(i),
+                    Warning::ALL.into_iter().find(|w| w.name() == *name),
+                ) {
+                    (Some(text), _) => format!("{name}: {text}"),
+                    (None, Some(w)) => format!("{name}: {w}"),
+                    (None, None) => (*name).to_owned(),
+                }
+            })
             .collect::<Vec<_>>()
             .join("\n                ")
     };
@@ -303,6 +309,7 @@ mod tests {
                 outlier_share: 0.01,
                 skewness: -0.12,
                 warnings: vec!["pass_cap"],
+                warning_texts: Vec::new(),
             },
             selection: SelectionJson {
                 glitch_rules: true,

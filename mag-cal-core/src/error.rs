@@ -360,19 +360,36 @@ impl fmt::Display for Versus {
     }
 }
 
-/// One figure with [`MIN_DIGITS`] significant digits (trailing zeros left
-/// out), as [`Versus`] prints it.
-pub(crate) struct Shown(f64);
+/// One `f32` figure with the fewest significant digits, at least
+/// [`MIN_DIGITS`], that read back as it (`0.123`, `0.2`), as [`Versus`]
+/// prints it.
+pub(crate) struct Shown(f32);
 
 impl Shown {
     pub(crate) fn alone(value: f32) -> Self {
-        Self(f64::from(value))
+        Self(value)
     }
 }
 
 impl fmt::Display for Shown {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write_figure(f, self.0, MIN_DIGITS)
+        let x = f64::from(self.0);
+        let mut digits = MIN_DIGITS;
+        // 9 significant digits tell every two `f32` apart.
+        while digits < 9
+            && decimal(x, digits).is_some_and(|(negative, m, e)| {
+                let k = e + 1 - digits as i32;
+                let size = if k >= 0 {
+                    m as f64 * pow10(k.unsigned_abs())
+                } else {
+                    m as f64 / pow10(k.unsigned_abs())
+                };
+                (if negative { -size } else { size }) as f32 != self.0
+            })
+        {
+            digits += 1;
+        }
+        write_figure(f, x, digits)
     }
 }
 
@@ -439,7 +456,9 @@ fn decimal(x: f64, digits: u32) -> Option<(bool, u64, i32)> {
             break;
         }
     }
-    Some((x < 0.0, m.clamp(low, high - 1), e))
+    // Within the digits whatever the rounding did (not `clamp`, which
+    // asserts its bounds' order: a panic path).
+    Some((x < 0.0, m.max(low).min(high.saturating_sub(1)), e))
 }
 
 /// Writes `x` with `digits` significant digits, trailing zeros left out:
@@ -495,7 +514,6 @@ fn write_figure(f: &mut fmt::Formatter<'_>, x: f64, digits: u32) -> fmt::Result 
     }
     Ok(())
 }
-
 
 /// A quality figure carried by an [`Error`]: an `f32` that compares by its
 /// bits, so that the error stays `Eq` and `Hash`. Formats as the number.
@@ -581,7 +599,10 @@ mod tests {
                 limit,
             }
             | Error::PoorCoverage { coverage: x, limit }
-            | Error::NoSphere { fit_error: x, limit }
+            | Error::NoSphere {
+                fit_error: x,
+                limit,
+            }
             | Error::FilledCloud { skewness: x, limit }
             | Error::SystematicMisfit {
                 lack_of_fit: x,
@@ -592,7 +613,10 @@ mod tests {
                 limit,
             }
             | Error::NotPlanar { flatness: x, limit }
-            | Error::NoEllipse { fit_error: x, limit } => Some((x.get(), limit.get())),
+            | Error::NoEllipse {
+                fit_error: x,
+                limit,
+            } => Some((x.get(), limit.get())),
             // Printed as percentages.
             Error::FieldStrengthMismatch { deviation, limit } => {
                 Some((deviation.get().abs() * 100.0, limit.get() * 100.0))
@@ -841,9 +865,9 @@ mod tests {
             deviation: Figure::new(-0.31),
             limit: Figure::new(0.25),
         };
-        assert!(field
-            .to_string()
-            .starts_with("fitted field strength too far below the expected value (31 %, limit 25 %)"));
+        assert!(field.to_string().starts_with(
+            "fitted field strength too far below the expected value (31 %, limit 25 %)"
+        ));
         let planar = Error::Planar {
             flatness: Figure::new(0.0098),
             limit: Figure::new(0.03),
@@ -884,8 +908,14 @@ mod tests {
             let (a, b) = s.split_once(", limit ").unwrap();
             assert_ne!(a, b, "{s}");
             let (a, b): (f64, f64) = (a.parse().unwrap(), b.parse().unwrap());
-            assert!(a > b && (a - f64::from(y)).abs() < 1e-7 * f64::from(y), "{s}");
+            assert!(
+                a > b && (a - f64::from(y)).abs() < 1e-7 * f64::from(y),
+                "{s}"
+            );
         }
         assert_eq!(Shown::alone(0.2).to_string(), "0.2");
+        assert_eq!(Shown::alone(0.123).to_string(), "0.123");
+        assert_eq!(Shown::alone(0.300_000_1).to_string(), "0.3000001");
+        assert_eq!(Shown::alone(f32::INFINITY).to_string(), "inf");
     }
 }

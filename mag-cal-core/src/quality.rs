@@ -1094,9 +1094,12 @@ impl Warning {
         };
         let detail = match self {
             Warning::PassCap => Detail::Cap(config.max_passes),
-            Warning::NonFiniteDropped => {
-                Detail::Rows(report.drops.non_finite.saturating_add(report.drops.overflow))
-            }
+            Warning::NonFiniteDropped => Detail::Rows(
+                report
+                    .drops
+                    .non_finite
+                    .saturating_add(report.drops.overflow),
+            ),
             Warning::FewSamples => Detail::Versus(
                 "rows used",
                 Figure::new(report.samples_used as f32),

@@ -11,7 +11,11 @@
 //! magcal_config_default(&config);
 //! MagcalResult result;
 //! MagcalStatus s = magcal_calibrate_i16(samples, n, &config, &result);
-//! if (s != MAGCAL_STATUS_OK) printf("%s\n", magcal_error_str(s));
+//! if (s != MAGCAL_STATUS_OK) {
+//!     char why[256]; /* e.g. "samples lie near a plane (flatness 0.013, limit 0.03): ..." */
+//!     magcal_refusal_message(&result.refusal, why, sizeof why);
+//!     printf("%s\n", why);
+//! }
 //! float u[3];
 //! magcal_apply(&result.calibration, raw, u);
 //! ```
@@ -29,12 +33,12 @@ use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, HeadingSmoother};
 use mag_cal_core::persist::{from_bytes, to_bytes, ENCODED_LEN};
 use mag_cal_core::{
-    calibrate, Calibration, Config, Error, Figure, Fit, LsVariant, Method, Real, Sample,
-    Thresholds,
+    calibrate, Calibration, Config, Error, Figure, Fit, LsVariant, Method, Real, Sample, Thresholds,
 };
 
 /// The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-/// `magcal_error_str` gives a sentence for each.
+/// `magcal_error_str` gives a sentence for each; for a calibration,
+/// `magcal_refusal_message` gives it with its figures.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MagcalStatus {
@@ -422,7 +426,11 @@ impl core::fmt::Write for CText<'_> {
         if self.cut {
             return Ok(());
         }
-        let room = self.buf.len().saturating_sub(1).saturating_sub(self.written);
+        let room = self
+            .buf
+            .len()
+            .saturating_sub(1)
+            .saturating_sub(self.written);
         let mut n = s.len().min(room);
         while n > 0 && !s.is_char_boundary(n) {
             n -= 1;

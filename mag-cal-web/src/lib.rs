@@ -38,7 +38,7 @@ use mag_cal_cli::input::{self, ColumnsUsed, Picked};
 use mag_cal_cli::output;
 use mag_cal_cli::selection::class_name;
 use mag_cal_core::collector::{Collector, Offer, Progress};
-use mag_cal_core::{Config, Method, SampleClass, Warning};
+use mag_cal_core::{Config, Method, SampleClass};
 use serde_json::{json, Value};
 
 /// Capacity of the live collection (24 bytes a sample). MotionCal keeps
@@ -200,13 +200,14 @@ fn success(
         .collect();
     doc["calibrated"] = Value::Array(calibrated);
     doc["norms"] = Value::Array(norms);
-    // The core's sentence for each warning the fit reported.
+    // The core's sentence for each warning the fit reported, with its
+    // figure and limit.
     doc["warnings"] = o
         .quality
         .warnings
         .iter()
-        .filter_map(|name| Warning::ALL.into_iter().find(|w| w.name() == *name))
-        .map(|w| json!({ "name": w.name(), "text": w.to_string() }))
+        .zip(&o.quality.warning_texts)
+        .map(|(name, text)| json!({ "name": name, "text": text }))
         .collect();
     doc["snippets"] = json!({ "c": snippets::c(o), "rust": snippets::rust(o) });
     doc["packet"] = json!(packet::from_outcome(o).to_vec());
