@@ -80,7 +80,8 @@
 #define MAGCAL_WARNING_HIGH_FIT_ERROR (1 << 9)
 
 // The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-// `magcal_error_str` gives a sentence for each.
+// `magcal_error_str` gives a sentence for each; for a calibration,
+// `magcal_refusal_message` gives it with its figures.
 typedef enum {
   // Success.
   MAGCAL_STATUS_OK = 0,

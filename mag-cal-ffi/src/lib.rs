@@ -334,10 +334,10 @@ impl MagcalRefusal {
     /// The core's error back, for its message; `None` for a status that
     /// is no error of the core (its sentence is `magcal_error_str`'s).
     /// `name` is compared, never read.
-    fn to_core(&self, status: MagcalStatus) -> Option<Error> {
+    fn to_core(self) -> Option<Error> {
         let (figure, limit) = (Figure::new(self.figure), Figure::new(self.limit));
         let named = |i: usize| FIGURE_NAMES.get(i).is_some_and(|n| n.as_ptr() == self.name);
-        Some(match status {
+        Some(match self.status {
             MagcalStatus::TooFewSamples => Error::TooFewSamples {
                 found: self.count as usize,
                 required: self.of as usize,
@@ -483,7 +483,7 @@ pub unsafe extern "C" fn magcal_refusal_message(
     // SAFETY: `refusal` is null-checked and aligned, a readable
     // `MagcalRefusal` by the caller's word.
     let (status, error) = match unsafe { read_refusal(refusal) } {
-        Some((status, Some(r))) => (status, r.to_core(r.status)),
+        Some((status, Some(r))) => (status, r.to_core()),
         Some((status, None)) => (status, None),
         None => (MagcalStatus::NullPointer as i32, None),
     };
