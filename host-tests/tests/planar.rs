@@ -191,7 +191,7 @@ fn the_real_planar_recording_gets_a_heading_calibration() {
     let samples = read_xyz("planar_243.txt");
     assert!(matches!(
         calibrate::<f64, _>(&samples, &Config::default()),
-        Err(Error::Planar)
+        Err(Error::Planar { .. })
     ));
     let fit = calibrate_planar::<f64, _>(&samples, &PlanarConfig::with_up([0.0, 0.0, 1.0]))
         .unwrap_or_else(|e| panic!("{e}"));

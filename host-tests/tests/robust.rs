@@ -571,7 +571,7 @@ fn the_ls_fit_alone_is_judged_by_its_shape() {
     };
     let text = e.to_string();
     assert!(
-        text.contains("skewness -0.80") && text.contains("fill a volume"),
+        text.contains("skewness -0.8, limit -0.6)") && text.contains("fill a volume"),
         "{text}"
     );
 }

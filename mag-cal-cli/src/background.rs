@@ -486,7 +486,8 @@ impl Log {
     }
 }
 
-/// Counts refusal `e` at `row` with the others of its kind.
+/// Counts refusal `e` at `row` with the others of its kind; the kind's
+/// reason is its last refusal's (figures differ from one refit to the next).
 fn count(refusals: &mut Vec<Refusal>, e: Error, row: usize) {
     let kind = std::mem::discriminant(&e);
     match refusals
@@ -496,6 +497,8 @@ fn count(refusals: &mut Vec<Refusal>, e: Error, row: usize) {
         Some(r) => {
             r.count += 1;
             r.last_row = row;
+            r.reason = e.to_string();
+            r.error = e;
         }
         None => refusals.push(Refusal {
             reason: e.to_string(),
@@ -719,6 +722,7 @@ fn row_list(rows: &[usize], n: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mag_cal_core::Figure;
 
     /// A device turned slowly through most orientations (the core's
     /// example): hard iron (250, -80, 40), axes 300, 330, 280.
@@ -778,9 +782,20 @@ mod tests {
     #[test]
     fn refusals_are_grouped_by_kind() {
         let mut refused = Vec::new();
-        count(&mut refused, Error::Planar, 10);
-        count(&mut refused, Error::PoorCoverage, 20);
-        count(&mut refused, Error::Planar, 30);
+        let planar = |flatness| Error::Planar {
+            flatness: Figure::new(flatness),
+            limit: Figure::new(0.03),
+        };
+        count(&mut refused, planar(0.02), 10);
+        count(
+            &mut refused,
+            Error::PoorCoverage {
+                coverage: Figure::new(0.04),
+                limit: Figure::new(0.05),
+            },
+            20,
+        );
+        count(&mut refused, planar(0.01), 30);
         assert_eq!(refused.len(), 2);
         assert_eq!(
             (refused[0].count, refused[0].first_row, refused[0].last_row),
@@ -789,7 +804,8 @@ mod tests {
         let readings = Readings::default();
         let reason = not_calibrated(&refused, &readings, 0, 0);
         assert!(
-            reason.starts_with("3 refits refused, the last at row 30: samples lie near a plane"),
+            reason.starts_with("3 refits refused, the last at row 30: samples lie near a plane")
+                && reason.contains("flatness 0.01,"),
             "{reason}"
         );
     }

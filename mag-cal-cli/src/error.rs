@@ -76,7 +76,7 @@ impl fmt::Display for CliError {
             CliError::WriteFile { path, err } => {
                 write!(f, "cannot write {}: {}", one_line(path), io_reason(err))
             }
-            CliError::Refused(err @ mag_cal_core::Error::Planar) => write!(
+            CliError::Refused(err @ mag_cal_core::Error::Planar { .. }) => write!(
                 f,
                 "calibration refused: {err} (a device that turns about one axis only: 'magcal planar')"
             ),

@@ -111,12 +111,18 @@ pub struct Quality {
     pub skewness: f64,
     /// Names of the core's warnings (`pass_cap`, ...), empty when none.
     pub warnings: Vec<&'static str>,
+    /// The core's sentence of each warning, in the same order, with the
+    /// figure and the limit that raised it ([`mag_cal_core::Warning::explain`]).
+    #[serde(skip)]
+    pub warning_texts: Vec<String>,
 }
 
 impl Quality {
     /// The figures of the core's `quality` with the calibration's radial RMS
-    /// and norm spread (over the rows it used) and its warnings: the
-    /// `quality` object of `fit`'s JSON, also `magcal background`'s.
+    /// and norm spread (over the rows it used) and its warnings (their
+    /// names; `warning_texts` is left empty, for the caller that has the
+    /// core's report): the `quality` object of `fit`'s JSON, also `magcal
+    /// background`'s.
     pub fn from_core<T: Real>(
         quality: &mag_cal_core::Quality<T>,
         radial_rms: T,
@@ -136,6 +142,7 @@ impl Quality {
             outlier_share: quality.outlier_share.to_f64(),
             skewness: quality.skewness.to_f64(),
             warnings: warnings.iter().map(|w| w.name()).collect(),
+            warning_texts: Vec::new(),
         }
     }
 }
@@ -322,12 +329,19 @@ fn fit_in<T: Real>(
         robust_passes: report.robust_passes,
         start_window: report.start_window(),
         timing_us: elapsed_us,
-        quality: Quality::from_core(
-            &report.quality,
-            report.radial_rms,
-            spread(norms),
-            report.warnings,
-        ),
+        quality: Quality {
+            warning_texts: report
+                .warnings
+                .iter()
+                .map(|w| w.explain(report, config).to_string())
+                .collect(),
+            ..Quality::from_core(
+                &report.quality,
+                report.radial_rms,
+                spread(norms),
+                report.warnings,
+            )
+        },
         selection: SelectionJson::from_core(&report.selection),
         classes,
     })

@@ -100,18 +100,24 @@ pub fn calibration(p: &Parameters, q: &Quality) -> String {
         sig(100.0 * q.outlier_share, 2),
         sig(q.skewness, 2)
     );
-    // One line a warning: its name and the core's sentence for people.
+    // One line a warning: its name and the core's sentence for people,
+    // with its figure when the fit gave one.
     let warnings = if q.warnings.is_empty() {
         "none".to_owned()
     } else {
         q.warnings
             .iter()
-            .map(
-                |name| match Warning::ALL.into_iter().find(|w| w.name() == *name) {
-                    Some(w) => format!("{name}: {w}"),
-                    None => (*name).to_owned(),
-                },
-            )
+            .enumerate()
+            .map(|(i, name)| {
+                match (
+                    q.warning_texts.get(i),
+                    Warning::ALL.into_iter().find(|w| w.name() == *name),
+                ) {
+                    (Some(text), _) => format!("{name}: {text}"),
+                    (None, Some(w)) => format!("{name}: {w}"),
+                    (None, None) => (*name).to_owned(),
+                }
+            })
             .collect::<Vec<_>>()
             .join("\n                ")
     };
@@ -317,6 +323,7 @@ mod tests {
                 outlier_share: 0.01,
                 skewness: -0.12,
                 warnings: vec!["pass_cap"],
+                warning_texts: Vec::new(),
             },
             selection: SelectionJson {
                 glitch_rules: true,

@@ -1198,6 +1198,41 @@ fn the_nearly_planar_recording_is_refused_naming_the_geometry() {
     magcal(&["fit", &planar, "--method", "submle"], None).fails_with(3, "plane");
 }
 
+/// Half of a real recording (the rows with x above its median): refused
+/// for its coverage, with the figure and the limit printed apart (the
+/// figure is the core's, a little below the limit).
+#[test]
+fn a_real_half_sphere_is_refused_with_its_coverage_and_limit() {
+    let rows = std::fs::read_to_string(real("icm20948_mag_300.csv")).expect("readable");
+    let rows: Vec<(i64, &str)> = rows
+        .lines()
+        .filter_map(|l| Some((l.split(',').next()?.trim().parse().ok()?, l)))
+        .collect();
+    let mut x: Vec<i64> = rows.iter().map(|r| r.0).collect();
+    x.sort_unstable();
+    let median = x[x.len() / 2];
+    let half: String = rows
+        .iter()
+        .filter(|r| r.0 >= median)
+        .map(|r| format!("{}\n", r.1))
+        .collect();
+    let run = magcal(&["fit", "-"], Some(half.as_bytes()));
+    run.fails_with(
+        3,
+        "calibration refused: calibrated directions cover too little of the sphere (coverage 0.0",
+    );
+    let shown = run.stderr.split("(coverage ").nth(1).expect("a figure");
+    let (figure, limit) = shown
+        .split_once(')')
+        .expect("closed")
+        .0
+        .split_once(", limit ")
+        .expect("a limit");
+    assert_eq!(limit, "0.05", "{}", run.stderr);
+    let figure: f64 = figure.parse().expect("a number");
+    assert!(figure > 0.03 && figure < 0.05, "{}", run.stderr);
+}
+
 #[test]
 fn json_carries_the_geometry_figures_and_warnings() {
     let v = magcal(

@@ -737,7 +737,7 @@ fn best_start<T: Real, S: Sample>(
     passes: &mut u32,
 ) -> Option<usize> {
     // The screening does not depend on the start: made once for all.
-    let screening = screen::screen(samples, scan).ok()?;
+    let screening = screen::screen(samples, scan, config.thresholds.refuse_fit_error).ok()?;
     *passes = passes.saturating_add(screening.passes);
     // The start that scores best, and its score.
     let mut best: Option<(usize, T)> = None;
@@ -882,7 +882,7 @@ fn robust_start<'r, T: Real, S: Sample>(
     runs: &'r mut runs::Runs,
     k: usize,
 ) -> Result<Start<'r, T>, Error> {
-    let screening = screen::screen(samples, scan)?;
+    let screening = screen::screen(samples, scan, config.thresholds.refuse_fit_error)?;
     let passes = screening.passes;
     start_from(
         samples, config, &screening, passes, ls_solve, figures, runs, k,

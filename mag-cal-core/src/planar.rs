@@ -325,7 +325,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
     let scanned = scan::<T, S>(samples, true)?;
-    let screening = screen(samples, &scanned)?;
+    let screening = screen(samples, &scanned, config.thresholds.refuse_fit_error)?;
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),

@@ -342,8 +342,11 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     let above = |v: Option<T>, limit: f32| v.is_some_and(|v| !(v <= lit(limit)));
     let fig = |v: T| Figure::new(v.to_single());
     let mut w = Warnings::NONE;
-    if below(f.flatness, th.refuse_flatness) {
-        return Err(Error::Planar);
+    if let Some(v) = f.flatness.filter(|_| below(f.flatness, th.refuse_flatness)) {
+        return Err(Error::Planar {
+            flatness: fig(v),
+            limit: Figure::new(th.refuse_flatness),
+        });
     }
     if let Some(e) = f
         .fit_error
@@ -377,19 +380,37 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
             });
         }
     }
-    if above(f.distortion, th.refuse_distortion) {
-        return Err(Error::ExtremeDistortion);
-    }
-    if below(f.quadric_gap, th.refuse_quadric_gap) && below(f.radial_rms, th.gap_noise_limit) {
-        return Err(Error::AmbiguousQuadric);
-    }
-    if below(f.coverage, th.refuse_coverage) {
-        return Err(Error::PoorCoverage);
-    }
-    if f.field_deviation
-        .is_some_and(|d| !(d.abs() <= lit(th.refuse_field_deviation)))
+    if let Some(d) = f
+        .distortion
+        .filter(|_| above(f.distortion, th.refuse_distortion))
     {
-        return Err(Error::FieldStrengthMismatch);
+        return Err(Error::ExtremeDistortion {
+            distortion: fig(d),
+            limit: Figure::new(th.refuse_distortion),
+        });
+    }
+    if let Some(g) = f.quadric_gap.filter(|_| {
+        below(f.quadric_gap, th.refuse_quadric_gap) && below(f.radial_rms, th.gap_noise_limit)
+    }) {
+        return Err(Error::AmbiguousQuadric {
+            quadric_gap: fig(g),
+            limit: Figure::new(th.refuse_quadric_gap),
+        });
+    }
+    if let Some(c) = f.coverage.filter(|_| below(f.coverage, th.refuse_coverage)) {
+        return Err(Error::PoorCoverage {
+            coverage: fig(c),
+            limit: Figure::new(th.refuse_coverage),
+        });
+    }
+    if let Some(d) = f
+        .field_deviation
+        .filter(|d| !(d.abs() <= lit(th.refuse_field_deviation)))
+    {
+        return Err(Error::FieldStrengthMismatch {
+            deviation: fig(d),
+            limit: Figure::new(th.refuse_field_deviation),
+        });
     }
     for x in f.step_warnings.iter() {
         w.insert(x);
@@ -999,7 +1020,14 @@ impl Warning {
 /// A sentence for people: what the warning means and what to do.
 impl core::fmt::Display for Warning {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
+        f.write_str(self.sentence())
+    }
+}
+
+impl Warning {
+    /// The sentence for people, without figures.
+    const fn sentence(self) -> &'static str {
+        match self {
             Warning::PassCap => {
                 "iterated ADC2 stopped at its pass cap: the coverage is weak; turn the sensor through more orientations"
             }
@@ -1028,7 +1056,116 @@ impl core::fmt::Display for Warning {
             Warning::HighFitError => {
                 "the readings scatter widely about the ellipsoid: noisy data or nearby disturbances"
             }
-        })
+        }
+    }
+}
+
+impl Warning {
+    /// The warning's sentence with the figure of `report` that raised it
+    /// and the limit of `config` it passed, printed as the refusals print
+    /// theirs (the fewest digits that tell the two apart), e.g. `the
+    /// readings lie close to a plane (flatness 0.061, limit 0.1): turn the
+    /// sensor about more axes`. The warnings that count rows name the
+    /// count; [`Warning::LowSpread`] has no figure in the report and prints
+    /// its sentence alone.
+    ///
+    /// ```
+    /// # use mag_cal_core::{calibrate, Config, Warning};
+    /// # let samples: Vec<[f32; 3]> = (0..40)
+    /// #     .map(|i| {
+    /// #         let (t, p) = (i as f32 * 2.4, (i as f32 / 40.0 * 2.0 - 1.0).acos());
+    /// #         [300.0 * p.sin() * t.cos(), 300.0 * p.sin() * t.sin(), 300.0 * p.cos()]
+    /// #     })
+    /// #     .collect();
+    /// let config = Config::default();
+    /// let fit = calibrate::<f32, _>(&samples, &config)?;
+    /// assert!(fit.report.warnings.contains(Warning::FewSamples));
+    /// assert_eq!(
+    ///     Warning::FewSamples.explain(&fit.report, &config).to_string(),
+    ///     "few readings (rows used 40, limit 50): collect more for a reliable calibration"
+    /// );
+    /// # Ok::<(), mag_cal_core::Error>(())
+    /// ```
+    pub fn explain<T: Real>(self, report: &crate::Report<T>, config: &crate::Config) -> Explained {
+        let th = &config.thresholds;
+        let q = &report.quality;
+        let versus = |name, figure: T, limit: f32| {
+            Detail::Versus(name, Figure::new(figure.to_single()), Figure::new(limit))
+        };
+        let detail = match self {
+            Warning::PassCap => Detail::Cap(config.max_passes),
+            Warning::NonFiniteDropped => Detail::Rows(
+                report
+                    .drops
+                    .non_finite
+                    .saturating_add(report.drops.overflow),
+            ),
+            Warning::FewSamples => Detail::Versus(
+                "rows used",
+                Figure::new(report.samples_used as f32),
+                Figure::new(th.warn_samples as f32),
+            ),
+            Warning::LowSpread => Detail::None,
+            Warning::NearlyPlanar => versus("flatness", q.flatness, th.warn_flatness),
+            Warning::WeakQuadric => versus("quadric gap", q.quadric_gap, th.warn_quadric_gap),
+            Warning::WeakCoverage => {
+                versus("Gram condition", q.gram_condition, th.warn_gram_condition)
+            }
+            Warning::RowsDropped => Detail::Rows(report.drops.glitches()),
+            Warning::OutliersRejected => {
+                Detail::Rows(report.screened.saturating_add(report.rejected))
+            }
+            Warning::HighFitError => versus("fit error", q.fit_error, th.warn_fit_error),
+        };
+        Explained {
+            warning: self,
+            detail,
+        }
+    }
+}
+
+/// A warning's sentence with its figure ([`Warning::explain`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Explained {
+    warning: Warning,
+    detail: Detail,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Detail {
+    None,
+    /// A figure's name, the figure and the limit it passed.
+    Versus(&'static str, Figure, Figure),
+    /// Rows counted.
+    Rows(usize),
+    /// A pass cap.
+    Cap(u32),
+}
+
+impl core::fmt::Display for Explained {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let mut sentence = self.warning.sentence();
+        // The figure goes after the finding, before the advice.
+        let advice = sentence.split_once(": ").map(|(finding, advice)| {
+            sentence = finding;
+            advice
+        });
+        f.write_str(sentence)?;
+        match self.detail {
+            Detail::None => {}
+            Detail::Versus(name, figure, limit) => write!(
+                f,
+                " ({name} {})",
+                crate::error::Versus::new(figure, limit, "")
+            )?,
+            Detail::Rows(1) => f.write_str(" (1 row)")?,
+            Detail::Rows(n) => write!(f, " ({n} rows)")?,
+            Detail::Cap(n) => write!(f, " ({n} passes)")?,
+        }
+        match advice {
+            Some(advice) => write!(f, ": {advice}"),
+            None => Ok(()),
+        }
     }
 }
 

@@ -227,11 +227,13 @@ pub(crate) struct Screening<T: Real> {
 }
 
 /// Screens the rows the scan's rules keep. Out of line: its histograms
-/// take stack only while it runs.
+/// take stack only while it runs. `refuse_fit_error` is the caller's limit
+/// of the fit error, which the refusal of rows crowded on one point names.
 #[inline(never)]
 pub(crate) fn screen<T: Real, S: Sample>(
     samples: &[S],
     scan: &Scan<T>,
+    refuse_fit_error: f32,
 ) -> Result<Screening<T>, Error> {
     let (centre, spread, rules, mut passes) = median_centre(samples, scan);
     let gate = Gate {
@@ -262,7 +264,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
         // More than half the rows sit on the median centre.
         return Err(Error::NoSphere {
             fit_error: crate::Figure::new(f32::INFINITY),
-            limit: crate::Figure::new(crate::quality::REFUSE_FIT_ERROR as f32),
+            limit: crate::Figure::new(refuse_fit_error),
         });
     }
     // The median centre follows the device's dwell: samples crowded on one
@@ -852,7 +854,7 @@ mod tests {
             [v[0] + 150, v[1] - 80, v[2] + 20]
         });
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let clean = screen(&rows, &s).unwrap();
+        let clean = screen(&rows, &s, crate::quality::REFUSE_FIT_ERROR as f32).unwrap();
         assert_eq!(clean.drops.clipped, 0);
         let mut clipped = 0;
         let mut beyond = 0;
@@ -865,7 +867,7 @@ mod tests {
         }
         assert!(clipped > 40, "{clipped}");
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let dirty = screen(&rows, &s).unwrap();
+        let dirty = screen(&rows, &s, crate::quality::REFUSE_FIT_ERROR as f32).unwrap();
         assert_eq!(dirty.rules.clip[0][1], 470.0);
         // The clipped rows, and the clean rows that were at 470 already.
         let at = rows.iter().filter(|r| r[0] == 470).count();

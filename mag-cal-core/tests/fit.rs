@@ -138,9 +138,10 @@ fn errors() {
             [a.cos(), a.sin(), 0.0]
         })
         .collect();
-    assert_eq!(
-        calibrate::<f64, _>(&planar, &cfg).unwrap_err(),
-        Error::Planar
+    let e = calibrate::<f64, _>(&planar, &cfg).unwrap_err();
+    assert!(
+        matches!(e, Error::Planar { flatness, limit } if flatness.get() < limit.get()),
+        "{e}"
     );
 }
 
@@ -212,5 +213,30 @@ fn a_method_left_out_is_refused_by_its_feature() {
                 }
             );
         }
+    }
+}
+
+/// A device lying still (most rows on one point): refused by the
+/// screening, naming the caller's fit-error limit, not the default one.
+#[test]
+fn a_still_device_names_the_configured_limit() {
+    let still: Vec<[i16; 3]> = (0..200)
+        .map(|i| [120 + i % 3, -40 + i % 5, 300 + i % 2])
+        .collect();
+    for limit in [0.2f32, 0.3, 0.123] {
+        let cfg = Config {
+            thresholds: mag_cal_core::Thresholds {
+                refuse_fit_error: limit,
+                ..mag_cal_core::Thresholds::DEFAULT
+            },
+            ..Config::default()
+        };
+        let e = calibrate::<f32, _>(&still, &cfg).unwrap_err();
+        assert!(
+            matches!(e, Error::NoSphere { limit: l, .. } if l.get() == limit),
+            "{e:?}"
+        );
+        let shown = format!("fit error limit {limit})");
+        assert!(e.to_string().contains(&shown), "{e}");
     }
 }

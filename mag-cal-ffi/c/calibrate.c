@@ -122,7 +122,9 @@ int main(int argc, char **argv) {
     MagcalStatus s = f64 ? magcal_calibrate_i16_f64((const int16_t(*)[3])samples, n, &config, &r)
                          : magcal_calibrate_i16((const int16_t(*)[3])samples, n, &config, &r);
     if (s != MAGCAL_STATUS_OK) {
-        printf("not calibrated: %s\n", magcal_error_str(s));
+        char why[256];
+        magcal_refusal_message(&r.refusal, why, sizeof why);
+        printf("not calibrated: %s\n", why);
         return 3;
     }
     const MagcalCalibration *cal = &r.calibration;
@@ -199,8 +201,14 @@ int main(int argc, char **argv) {
         still[i][2] = (int16_t)(300 + i % 2);
     }
     s = magcal_calibrate_i16((const int16_t(*)[3])still, 200, &config, &r);
-    printf("a device lying still: %s\n", magcal_error_str(s));
-    if (s == MAGCAL_STATUS_OK) failed = 1;
+    char why[256];
+    size_t len = magcal_refusal_message(&r.refusal, why, sizeof why);
+    printf("a device lying still: %s\n", why);
+    /* The figure and limit that decided it, as numbers too. */
+    printf("  (%s %g, limit %g)\n", r.refusal.name, r.refusal.figure, r.refusal.limit);
+    if (s == MAGCAL_STATUS_OK || r.refusal.status != s || len >= sizeof why ||
+        !(r.refusal.figure > r.refusal.limit))
+        failed = 1;
 
     if (argc >= 4) failed |= check(cal, argv[3], f64 ? 1e-6 : 1e-4);
     printf("%s\n", failed ? "FAILED" : "ok");

@@ -80,7 +80,8 @@
 #define MAGCAL_WARNING_HIGH_FIT_ERROR (1 << 9)
 
 // The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-// `magcal_error_str` gives a sentence for each.
+// `magcal_error_str` gives a sentence for each; for a calibration,
+// `magcal_refusal_message` gives it with its figures.
 typedef enum {
   // Success.
   MAGCAL_STATUS_OK = 0,
@@ -156,6 +157,34 @@ typedef enum {
   // still at the start, or by a wild reading among the first 20).
   MAGCAL_OFFER_RESTARTED = 7,
 } MagcalOffer;
+
+// Why a `magcal_calibrate_*` call did not calibrate, with the figure that
+// decided it: the call fills `MagcalResult::refusal` whatever it returns
+// (`status` `MAGCAL_STATUS_OK` and no figure after a calibration).
+// `magcal_refusal_message` writes it as a sentence, the same as the Rust
+// core's.
+typedef struct {
+  // The status the call returned.
+  MagcalStatus status;
+  // What `figure` is, NUL-terminated and static, never null: `flatness`,
+  // `quadric gap`, `distortion`, `coverage`, `field deviation`, `fit
+  // error`, `skewness` (a filled cloud, under
+  // `MAGCAL_STATUS_NO_SPHERE`), `outlier share`, `lack of fit`; for
+  // `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out; else "".
+  const char *name;
+  // The figure that decided the refusal (`fitted / expected - 1` for the
+  // field deviation, rejected over valid rows for the outlier share), NaN
+  // when the refusal has none.
+  float figure;
+  // The limit it passed (the `MagcalThresholds` value, or the core's),
+  // NaN when none.
+  float limit;
+  // A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
+  // (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`); else 0.
+  uint32_t count;
+  // What `count` is compared with: samples required, valid rows; else 0.
+  uint32_t of;
+} MagcalRefusal;
 
 // The judging limits (`magcal_config_default` fills the measured ones).
 // Every figure is relative to the field; see `mag-cal-core`'s docs.
@@ -274,6 +303,9 @@ typedef struct {
   // outside window `k` (half the rows from `(k - 1) n / 4` on, wrapping),
   // when the first result was in doubt and that start scored best.
   uint32_t start;
+  // Why not, when the call refused (filled whatever it returns; the
+  // other fields only on success).
+  MagcalRefusal refusal;
 } MagcalResult;
 
 // A circular moving average of headings: caller-owned storage (declare
@@ -320,6 +352,24 @@ extern "C" {
 // status" for a value that is none).
 const char *magcal_error_str(int32_t status);
 
+// Writes the sentence of `refusal` (as `MagcalResult::refusal` holds it)
+// into `buf`, `size` bytes, NUL-terminated: the Rust core's message with
+// its figure and limit, e.g. `samples lie near a plane (flatness 0.01,
+// limit 0.03): turn the sensor through all orientations`; for a status
+// that is no refusal of the core, `magcal_error_str`'s sentence. Returns
+// the length of the whole sentence without the NUL, as `snprintf` does:
+// a value `>= size` means it was cut (at a character boundary). `buf`
+// may be null when `size` is 0 (to ask for the length). A null `refusal`
+// gives the sentence of `MAGCAL_STATUS_NULL_POINTER`.
+//
+// It links the message texts and a small number printer (not
+// `printf`): a program that does not call it does not pay for them.
+//
+// # Safety
+// Every non-null pointer must point to valid memory of the documented
+// size (writable for outputs) for the duration of the call.
+size_t magcal_refusal_message(const MagcalRefusal *refusal, char *buf, size_t size);
+
 // Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
 // handling on, the measured thresholds.
 //
@@ -330,8 +380,8 @@ MagcalStatus magcal_config_default(MagcalConfig *out);
 
 // Calibrates from `count` raw readings `samples[i][0..3]` in integer
 // counts, computing in `float` (hardware floating point on a Cortex-M4F).
-// On success fills `out`; on failure leaves it unchanged and says why (a
-// refusal names its cause).
+// On success fills `out`; on failure fills only `out->refusal` (the cause,
+// and the figure and limit that decided it: `magcal_refusal_message`).
 //
 // # Safety
 // Every non-null pointer must point to valid memory of the documented

@@ -11,7 +11,11 @@
 //! magcal_config_default(&config);
 //! MagcalResult result;
 //! MagcalStatus s = magcal_calibrate_i16(samples, n, &config, &result);
-//! if (s != MAGCAL_STATUS_OK) printf("%s\n", magcal_error_str(s));
+//! if (s != MAGCAL_STATUS_OK) {
+//!     char why[256]; /* e.g. "samples lie near a plane (flatness 0.013, limit 0.03): ..." */
+//!     magcal_refusal_message(&result.refusal, why, sizeof why);
+//!     printf("%s\n", why);
+//! }
 //! float u[3];
 //! magcal_apply_i16(&result.calibration, raw, u); /* int16_t raw[3] */
 //! ```
@@ -29,11 +33,12 @@ use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, HeadingSmoother};
 use mag_cal_core::persist::{from_bytes, to_bytes, ENCODED_LEN};
 use mag_cal_core::{
-    calibrate, Calibration, Config, Error, Fit, LsVariant, Method, Real, Sample, Thresholds,
+    calibrate, Calibration, Config, Error, Figure, Fit, LsVariant, Method, Real, Sample, Thresholds,
 };
 
 /// The outcome of a call: `MAGCAL_STATUS_OK` or why not.
-/// `magcal_error_str` gives a sentence for each.
+/// `magcal_error_str` gives a sentence for each; for a calibration,
+/// `magcal_refusal_message` gives it with its figures.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MagcalStatus {
@@ -133,11 +138,11 @@ impl From<Error> for MagcalStatus {
             Error::MismatchedLengths => Self::InvalidArgument,
             Error::NotEnabled { .. } => Self::NotEnabled,
             Error::InvalidNoiseCovariance => Self::InvalidNoiseCovariance,
-            Error::Planar => Self::Planar,
-            Error::AmbiguousQuadric => Self::AmbiguousQuadric,
-            Error::ExtremeDistortion => Self::ExtremeDistortion,
-            Error::PoorCoverage => Self::PoorCoverage,
-            Error::FieldStrengthMismatch => Self::FieldStrengthMismatch,
+            Error::Planar { .. } => Self::Planar,
+            Error::AmbiguousQuadric { .. } => Self::AmbiguousQuadric,
+            Error::ExtremeDistortion { .. } => Self::ExtremeDistortion,
+            Error::PoorCoverage { .. } => Self::PoorCoverage,
+            Error::FieldStrengthMismatch { .. } => Self::FieldStrengthMismatch,
             Error::NoSphere { .. } | Error::FilledCloud { .. } => Self::NoSphere,
             Error::TooManyOutliers { .. } => Self::TooManyOutliers,
             Error::SystematicMisfit { .. } => Self::SystematicMisfit,
@@ -189,6 +194,348 @@ pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
         MagcalStatus::Other => c"calibration failed",
     };
     s.as_ptr()
+}
+
+/// Why a `magcal_calibrate_*` call did not calibrate, with the figure that
+/// decided it: the call fills `MagcalResult::refusal` whatever it returns
+/// (`status` `MAGCAL_STATUS_OK` and no figure after a calibration).
+/// `magcal_refusal_message` writes it as a sentence, the same as the Rust
+/// core's.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MagcalRefusal {
+    /// The status the call returned.
+    pub status: MagcalStatus,
+    /// What `figure` is, NUL-terminated and static, never null: `flatness`,
+    /// `quadric gap`, `distortion`, `coverage`, `field deviation`, `fit
+    /// error`, `skewness` (a filled cloud, under
+    /// `MAGCAL_STATUS_NO_SPHERE`), `outlier share`, `lack of fit`; for
+    /// `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out; else "".
+    pub name: *const c_char,
+    /// The figure that decided the refusal (`fitted / expected - 1` for the
+    /// field deviation, rejected over valid rows for the outlier share), NaN
+    /// when the refusal has none.
+    pub figure: f32,
+    /// The limit it passed (the `MagcalThresholds` value, or the core's),
+    /// NaN when none.
+    pub limit: f32,
+    /// A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
+    /// (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`); else 0.
+    pub count: u32,
+    /// What `count` is compared with: samples required, valid rows; else 0.
+    pub of: u32,
+}
+
+/// Names of `MagcalRefusal::name`: the figures, then the features.
+const FIGURE_NAMES: [&core::ffi::CStr; 9] = [
+    c"flatness",
+    c"quadric gap",
+    c"distortion",
+    c"coverage",
+    c"field deviation",
+    c"fit error",
+    c"skewness",
+    c"outlier share",
+    c"lack of fit",
+];
+const FEATURES: [(&str, &core::ffi::CStr); 5] = [
+    ("adc1", c"adc1"),
+    ("adc2-iter", c"adc2-iter"),
+    ("submle", c"submle"),
+    ("svd10", c"svd10"),
+    ("lg10", c"lg10"),
+];
+
+impl MagcalRefusal {
+    /// A status without figures.
+    fn plain(status: MagcalStatus) -> Self {
+        Self {
+            status,
+            name: c"".as_ptr(),
+            figure: f32::NAN,
+            limit: f32::NAN,
+            count: 0,
+            of: 0,
+        }
+    }
+
+    /// `status` with the figure named `FIGURE_NAMES[name]`.
+    fn versus(status: MagcalStatus, name: usize, figure: f32, limit: f32) -> Self {
+        Self {
+            name: FIGURE_NAMES.get(name).map_or(c"", |n| n).as_ptr(),
+            figure,
+            limit,
+            ..Self::plain(status)
+        }
+    }
+
+    /// The core's error as C reads it.
+    fn from_core(e: Error) -> Self {
+        let status = MagcalStatus::from(e);
+        match e {
+            Error::TooFewSamples { found, required } => Self {
+                count: to_u32(found),
+                of: to_u32(required),
+                ..Self::plain(status)
+            },
+            Error::NoConvergence { iterations } => Self {
+                count: iterations,
+                ..Self::plain(status)
+            },
+            Error::UnsupportedVersion { found } => Self {
+                count: u32::from(found),
+                ..Self::plain(status)
+            },
+            Error::NotEnabled { feature } => Self {
+                name: FEATURES
+                    .iter()
+                    .find(|(f, _)| *f == feature)
+                    .map_or(c"", |(_, c)| c)
+                    .as_ptr(),
+                ..Self::plain(status)
+            },
+            Error::Planar { flatness, limit } => {
+                Self::versus(status, 0, flatness.get(), limit.get())
+            }
+            Error::AmbiguousQuadric { quadric_gap, limit } => {
+                Self::versus(status, 1, quadric_gap.get(), limit.get())
+            }
+            Error::ExtremeDistortion { distortion, limit } => {
+                Self::versus(status, 2, distortion.get(), limit.get())
+            }
+            Error::PoorCoverage { coverage, limit } => {
+                Self::versus(status, 3, coverage.get(), limit.get())
+            }
+            Error::FieldStrengthMismatch { deviation, limit } => {
+                Self::versus(status, 4, deviation.get(), limit.get())
+            }
+            Error::NoSphere { fit_error, limit } => {
+                Self::versus(status, 5, fit_error.get(), limit.get())
+            }
+            Error::FilledCloud { skewness, limit } => {
+                Self::versus(status, 6, skewness.get(), limit.get())
+            }
+            Error::TooManyOutliers {
+                rejected,
+                valid,
+                limit,
+            } => Self {
+                count: to_u32(rejected),
+                of: to_u32(valid),
+                ..Self::versus(status, 7, rejected as f32 / valid as f32, limit.get())
+            },
+            Error::SystematicMisfit { lack_of_fit, limit } => {
+                Self::versus(status, 8, lack_of_fit.get(), limit.get())
+            }
+            _ => Self::plain(status),
+        }
+    }
+
+    /// The core's error back, for its message; `None` for a status that
+    /// is no error of the core (its sentence is `magcal_error_str`'s).
+    /// `name` is compared, never read.
+    fn to_core(self) -> Option<Error> {
+        let (figure, limit) = (Figure::new(self.figure), Figure::new(self.limit));
+        let named = |i: usize| FIGURE_NAMES.get(i).is_some_and(|n| n.as_ptr() == self.name);
+        Some(match self.status {
+            MagcalStatus::TooFewSamples => Error::TooFewSamples {
+                found: self.count as usize,
+                required: self.of as usize,
+            },
+            MagcalStatus::AllSamplesEqual => Error::AllSamplesEqual,
+            MagcalStatus::OutOfRange => Error::OutOfRange,
+            MagcalStatus::NotAnEllipsoid => Error::NotAnEllipsoid,
+            MagcalStatus::SingularSystem => Error::SingularSystem,
+            MagcalStatus::NoConvergence => Error::NoConvergence {
+                iterations: self.count,
+            },
+            MagcalStatus::NotEnabled => Error::NotEnabled {
+                feature: FEATURES
+                    .iter()
+                    .find(|(_, c)| c.as_ptr() == self.name)
+                    .map_or("", |(f, _)| f),
+            },
+            MagcalStatus::InvalidNoiseCovariance => Error::InvalidNoiseCovariance,
+            MagcalStatus::Planar => Error::Planar {
+                flatness: figure,
+                limit,
+            },
+            MagcalStatus::AmbiguousQuadric => Error::AmbiguousQuadric {
+                quadric_gap: figure,
+                limit,
+            },
+            MagcalStatus::ExtremeDistortion => Error::ExtremeDistortion {
+                distortion: figure,
+                limit,
+            },
+            MagcalStatus::PoorCoverage => Error::PoorCoverage {
+                coverage: figure,
+                limit,
+            },
+            MagcalStatus::FieldStrengthMismatch => Error::FieldStrengthMismatch {
+                deviation: figure,
+                limit,
+            },
+            MagcalStatus::NoSphere if named(6) => Error::FilledCloud {
+                skewness: figure,
+                limit,
+            },
+            MagcalStatus::NoSphere => Error::NoSphere {
+                fit_error: figure,
+                limit,
+            },
+            MagcalStatus::TooManyOutliers => Error::TooManyOutliers {
+                rejected: self.count as usize,
+                valid: self.of as usize,
+                limit,
+            },
+            MagcalStatus::SystematicMisfit => Error::SystematicMisfit {
+                lack_of_fit: figure,
+                limit,
+            },
+            MagcalStatus::Truncated => Error::Truncated,
+            MagcalStatus::BadMagic => Error::BadMagic,
+            MagcalStatus::UnsupportedVersion => Error::UnsupportedVersion {
+                found: u8::try_from(self.count).unwrap_or(u8::MAX),
+            },
+            MagcalStatus::ChecksumMismatch => Error::ChecksumMismatch,
+            MagcalStatus::Ok
+            | MagcalStatus::NullPointer
+            | MagcalStatus::InvalidArgument
+            | MagcalStatus::Undefined
+            | MagcalStatus::Other => return None,
+        })
+    }
+}
+
+/// Writes into a C buffer, truncating at a character boundary and
+/// counting the whole message's bytes.
+struct CText<'a> {
+    buf: &'a mut [u8],
+    /// Bytes written (at most `buf.len() - 1`, room for the NUL).
+    written: usize,
+    /// Bytes of the whole message.
+    total: usize,
+    /// A piece did not fit: nothing more is written.
+    cut: bool,
+}
+
+impl core::fmt::Write for CText<'_> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        self.total = self.total.saturating_add(s.len());
+        if self.cut {
+            return Ok(());
+        }
+        let room = self
+            .buf
+            .len()
+            .saturating_sub(1)
+            .saturating_sub(self.written);
+        let mut n = s.len().min(room);
+        while n > 0 && !s.is_char_boundary(n) {
+            n -= 1;
+        }
+        self.cut = n < s.len();
+        let dest = self.buf.iter_mut().skip(self.written);
+        for (d, b) in dest.zip(s.bytes().take(n)) {
+            *d = b;
+        }
+        self.written += n;
+        Ok(())
+    }
+}
+
+/// Writes the sentence of `refusal` (as `MagcalResult::refusal` holds it)
+/// into `buf`, `size` bytes, NUL-terminated: the Rust core's message with
+/// its figure and limit, e.g. `samples lie near a plane (flatness 0.01,
+/// limit 0.03): turn the sensor through all orientations`; for a status
+/// that is no refusal of the core, `magcal_error_str`'s sentence. Returns
+/// the length of the whole sentence without the NUL, as `snprintf` does:
+/// a value `>= size` means it was cut (at a character boundary). `buf`
+/// may be null when `size` is 0 (to ask for the length). A null `refusal`
+/// gives the sentence of `MAGCAL_STATUS_NULL_POINTER`.
+///
+/// It links the message texts and a small number printer (not
+/// `printf`): a program that does not call it does not pay for them.
+///
+/// # Safety
+/// Every non-null pointer must point to valid memory of the documented
+/// size (writable for outputs) for the duration of the call.
+#[no_mangle]
+pub unsafe extern "C" fn magcal_refusal_message(
+    refusal: *const MagcalRefusal,
+    buf: *mut c_char,
+    size: usize,
+) -> usize {
+    let buf: &mut [u8] = if buf.is_null() || size == 0 || size > isize::MAX as usize {
+        &mut []
+    } else {
+        // SAFETY: non-null, and the caller vouches for `size` writable
+        // bytes (the header says so); `u8` has no alignment.
+        unsafe { core::slice::from_raw_parts_mut(buf.cast::<u8>(), size) }
+    };
+    let mut text = CText {
+        buf,
+        written: 0,
+        total: 0,
+        cut: false,
+    };
+    // SAFETY: `refusal` is null-checked and aligned, a readable
+    // `MagcalRefusal` by the caller's word.
+    let (status, error) = match unsafe { read_refusal(refusal) } {
+        Some((status, Some(r))) => (status, r.to_core()),
+        Some((status, None)) => (status, None),
+        None => (MagcalStatus::NullPointer as i32, None),
+    };
+    let _ = match error {
+        Some(e) => core::fmt::Write::write_fmt(&mut text, format_args!("{e}")),
+        None => {
+            // SAFETY: `magcal_error_str` returns static NUL-terminated
+            // strings.
+            let sentence = unsafe { core::ffi::CStr::from_ptr(magcal_error_str(status)) };
+            core::fmt::Write::write_str(&mut text, sentence.to_str().unwrap_or(""))
+        }
+    };
+    if let Some(nul) = text.buf.get_mut(text.written) {
+        *nul = 0;
+    }
+    text.total
+}
+
+/// The status of `*refusal` as an integer (C may have stored any value in
+/// the enum) and, when it is a status, the refusal; `None` for a null or
+/// misaligned pointer.
+///
+/// # Safety
+/// A non-null, aligned `refusal` must point to a readable `MagcalRefusal`.
+unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<MagcalRefusal>)> {
+    if refusal.is_null() || !refusal.is_aligned() {
+        return None;
+    }
+    // SAFETY: as documented; the enum is read as its `int`, and every
+    // other field is valid for any bits.
+    let (raw, name, figure, limit, count, of) = unsafe {
+        (
+            core::ptr::addr_of!((*refusal).status).cast::<i32>().read(),
+            core::ptr::addr_of!((*refusal).name).read(),
+            core::ptr::addr_of!((*refusal).figure).read(),
+            core::ptr::addr_of!((*refusal).limit).read(),
+            core::ptr::addr_of!((*refusal).count).read(),
+            core::ptr::addr_of!((*refusal).of).read(),
+        )
+    };
+    let refusal = MagcalStatus::ALL
+        .into_iter()
+        .find(|s| *s as i32 == raw)
+        .map(|status| MagcalRefusal {
+            status,
+            name,
+            figure,
+            limit,
+            count,
+            of,
+        });
+    Some((raw, refusal))
 }
 
 /// `MagcalConfig::method`: the LS ellipsoid fit alone.
@@ -457,6 +804,9 @@ pub struct MagcalResult {
     /// outside window `k` (half the rows from `(k - 1) n / 4` on, wrapping),
     /// when the first result was in doubt and that start scored best.
     pub start: u32,
+    /// Why not, when the call refused (filled whatever it returns; the
+    /// other fields only on success).
+    pub refusal: MagcalRefusal,
 }
 
 /// Warning bits of `MagcalResult::warnings`.
@@ -518,6 +868,7 @@ impl<T: Real> From<&Fit<T>> for MagcalResult {
             warnings: bits,
             beside_runs: to_u32(r.beside_runs),
             start: u32::from(r.start),
+            refusal: MagcalRefusal::plain(MagcalStatus::Ok),
         }
     }
 }
@@ -551,25 +902,32 @@ fn run<T: Real, S: Sample>(
     // SAFETY: the header's contract: `count` samples at `samples`.
     let samples = match unsafe { slice(samples, count) } {
         Ok(s) => s,
-        Err(e) => return e,
+        Err(e) => return refuse(out, MagcalRefusal::plain(e)),
     };
     let core = match config.to_core() {
         Ok(c) => c,
-        Err(e) => return e,
+        Err(e) => return refuse(out, MagcalRefusal::plain(e)),
     };
     match calibrate::<T, S>(samples, &core) {
         Ok(fit) => {
             *out = MagcalResult::from(&fit);
             MagcalStatus::Ok
         }
-        Err(e) => e.into(),
+        Err(e) => refuse(out, MagcalRefusal::from_core(e)),
     }
+}
+
+/// Records `refusal` in `out` (its other fields unchanged) and returns its
+/// status.
+fn refuse(out: &mut MagcalResult, refusal: MagcalRefusal) -> MagcalStatus {
+    out.refusal = refusal;
+    refusal.status
 }
 
 /// Calibrates from `count` raw readings `samples[i][0..3]` in integer
 /// counts, computing in `float` (hardware floating point on a Cortex-M4F).
-/// On success fills `out`; on failure leaves it unchanged and says why (a
-/// refusal names its cause).
+/// On success fills `out`; on failure fills only `out->refusal` (the cause,
+/// and the figure and limit that decided it: `magcal_refusal_message`).
 ///
 /// # Safety
 /// Every non-null pointer must point to valid memory of the documented
@@ -1156,6 +1514,197 @@ mod tests {
                 MagcalStatus::InvalidArgument
             );
         }
+    }
+
+    /// `magcal_refusal_message` of `r` into a buffer of `size` bytes: the
+    /// text (up to the NUL) and the returned length.
+    fn message(r: &MagcalRefusal, size: usize) -> (String, usize) {
+        let mut buf = vec![0x55u8; size];
+        // SAFETY: a valid refusal and `size` writable bytes.
+        let n = unsafe { magcal_refusal_message(r, buf.as_mut_ptr().cast(), size) };
+        let text = match buf.iter().position(|b| *b == 0) {
+            Some(end) => String::from_utf8(buf[..end].to_vec()).unwrap(),
+            None => {
+                assert_eq!(size, 0, "no NUL in {size} bytes");
+                String::new()
+            }
+        };
+        (text, n)
+    }
+
+    /// The readings of a real recording in `../shared/data/real/`.
+    fn recording(name: &str) -> Vec<[f32; 3]> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/data/real")
+            .join(name);
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}: is ../shared beside the repo?", path.display()));
+        text.lines()
+            .filter_map(|line| {
+                let v: Vec<f32> = line
+                    .split(|c: char| c == ',' || c.is_whitespace())
+                    .filter(|f| !f.is_empty())
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .ok()?;
+                (v.len() >= 3).then(|| [v[0], v[1], v[2]])
+            })
+            .collect()
+    }
+
+    /// A real nearly planar recording: C reads the figure and limit the
+    /// core decided by, and the message is the core's, word for word.
+    #[test]
+    fn a_real_refusal_reads_in_c_as_in_rust() {
+        let samples = recording("planar_243.txt");
+        assert_eq!(samples.len(), 243);
+        let rust = calibrate::<f32, _>(&samples, &Config::default()).unwrap_err();
+        let Error::Planar { flatness, limit } = rust else {
+            panic!("{rust:?}");
+        };
+        let c = config();
+        let mut out = core::mem::MaybeUninit::<MagcalResult>::zeroed();
+        // SAFETY: valid pointers; `out` is zeroed (valid for its fields).
+        let (status, out) = unsafe {
+            let s = magcal_calibrate_f32(samples.as_ptr(), samples.len(), &c, out.as_mut_ptr());
+            (s, out.assume_init())
+        };
+        assert_eq!(status, MagcalStatus::Planar);
+        let r = out.refusal;
+        assert_eq!(r.status, status);
+        assert_eq!((r.figure, r.limit), (flatness.get(), limit.get()));
+        // SAFETY: a static NUL-terminated name.
+        let name = unsafe { CStr::from_ptr(r.name) };
+        assert_eq!(name.to_str(), Ok("flatness"));
+        let (text, n) = message(&r, 512);
+        assert_eq!(text, rust.to_string());
+        assert_eq!(n, text.len());
+        assert!(text.contains(", limit 0.03)"), "{text}");
+    }
+
+    /// Every refusal of the core that `magcal_calibrate_*` can return
+    /// goes through `MagcalRefusal` and back to the same message.
+    #[test]
+    fn every_refusal_round_trips() {
+        let f = Figure::new;
+        let errors = [
+            Error::TooFewSamples {
+                found: 9,
+                required: 10,
+            },
+            Error::AllSamplesEqual,
+            Error::OutOfRange,
+            Error::NotAnEllipsoid,
+            Error::SingularSystem,
+            Error::NoConvergence { iterations: 50 },
+            Error::NotEnabled { feature: "submle" },
+            Error::NotEnabled { feature: "lg10" },
+            Error::InvalidNoiseCovariance,
+            Error::Planar {
+                flatness: f(0.029_9),
+                limit: f(0.03),
+            },
+            Error::AmbiguousQuadric {
+                quadric_gap: f(2.999),
+                limit: f(3.0),
+            },
+            Error::ExtremeDistortion {
+                distortion: f(16.01),
+                limit: f(16.0),
+            },
+            Error::PoorCoverage {
+                coverage: f(0.0499),
+                limit: f(0.05),
+            },
+            Error::FieldStrengthMismatch {
+                deviation: f(-0.2501),
+                limit: f(0.25),
+            },
+            Error::NoSphere {
+                fit_error: f(0.2001),
+                limit: f(0.2),
+            },
+            Error::NoSphere {
+                fit_error: f(f32::INFINITY),
+                limit: f(0.2),
+            },
+            Error::FilledCloud {
+                skewness: f(-0.61),
+                limit: f(-0.6),
+            },
+            Error::TooManyOutliers {
+                rejected: 251,
+                valid: 1000,
+                limit: f(0.25),
+            },
+            Error::SystematicMisfit {
+                lack_of_fit: f(0.0123),
+                limit: f(0.01),
+            },
+            Error::Truncated,
+            Error::BadMagic,
+            Error::UnsupportedVersion { found: 7 },
+            Error::ChecksumMismatch,
+        ];
+        for e in errors {
+            let r = MagcalRefusal::from_core(e);
+            assert_eq!(r.status, MagcalStatus::from(e), "{e:?}");
+            assert_ne!(r.status, MagcalStatus::Other, "{e:?}");
+            assert_eq!(message(&r, 512).0, e.to_string(), "{e:?}");
+        }
+        // Statuses of the C API alone: `magcal_error_str`'s sentence.
+        let bad = MagcalRefusal::plain(MagcalStatus::InvalidArgument);
+        assert_eq!(message(&bad, 512).0, "an argument is out of its range");
+        // SAFETY: null is allowed.
+        let n = unsafe { magcal_refusal_message(core::ptr::null(), core::ptr::null_mut(), 0) };
+        assert_eq!(n, "a pointer argument is null".len());
+    }
+
+    /// Small buffers: cut, NUL-terminated, the whole length returned; a
+    /// status C made up is an unknown status.
+    #[test]
+    fn messages_are_cut_to_the_buffer() {
+        let r = MagcalRefusal::from_core(Error::SystematicMisfit {
+            lack_of_fit: Figure::new(0.0123),
+            limit: Figure::new(0.01),
+        });
+        let (whole, n) = message(&r, 512);
+        assert_eq!(n, whole.len());
+        for size in [1, 2, 10, n, n + 1] {
+            let (text, m) = message(&r, size);
+            assert_eq!(m, n, "{size}");
+            assert_eq!(text, whole[..n.min(size - 1)], "{size}");
+        }
+        // SAFETY: null with size 0 asks for the length.
+        let m = unsafe { magcal_refusal_message(&r, core::ptr::null_mut(), 0) };
+        assert_eq!(m, n);
+        let mut made_up = r;
+        // SAFETY: the status field written as the `int` C may store.
+        unsafe {
+            core::ptr::addr_of_mut!(made_up.status)
+                .cast::<i32>()
+                .write(99)
+        };
+        assert_eq!(message(&made_up, 64).0, "unknown status");
+    }
+
+    /// The C program's case: a device lying still, its figure and limit.
+    #[test]
+    fn a_device_lying_still_names_its_figure() {
+        let still: Vec<[i16; 3]> = (0..200)
+            .map(|i| [120 + i % 3, -40 + i % 5, 300 + i % 2])
+            .collect();
+        let c = config();
+        let mut out = core::mem::MaybeUninit::<MagcalResult>::zeroed();
+        // SAFETY: valid pointers; `out` is zeroed (valid for its fields).
+        let (status, out) = unsafe {
+            let s = magcal_calibrate_i16(still.as_ptr(), still.len(), &c, out.as_mut_ptr());
+            (s, out.assume_init())
+        };
+        let rust = calibrate::<f32, _>(&still, &Config::default()).unwrap_err();
+        assert_eq!(status, MagcalStatus::from(rust));
+        assert_eq!(out.refusal.status, status);
+        assert_eq!(message(&out.refusal, 512).0, rust.to_string());
     }
 
     #[test]

@@ -41,7 +41,7 @@ use mag_cal_cli::input::{self, ColumnsUsed, Picked, Table};
 use mag_cal_cli::selection::class_name;
 use mag_cal_cli::{output, planar};
 use mag_cal_core::collector::{Collector, Offer, Progress};
-use mag_cal_core::{Config, Error, Method, SampleClass, Warning};
+use mag_cal_core::{Config, Error, Method, SampleClass};
 use serde_json::{json, Value};
 
 /// Capacity of the live collection (24 bytes a sample). MotionCal keeps
@@ -232,7 +232,7 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
 /// whose advice names `magcal planar`: the page's planar fit instead.
 pub fn message(err: &CliError) -> String {
     match err {
-        CliError::Refused(cause @ Error::Planar) => format!(
+        CliError::Refused(cause @ Error::Planar { .. }) => format!(
             "calibration refused: {cause} (a device that turns about one axis only: fit it as planar)"
         ),
         _ => err.to_string(),
@@ -250,7 +250,7 @@ fn failure(err: &CliError, mut doc: Value) -> (u32, String) {
     doc["code"] = json!(code);
     doc["message"] = json!(message(err));
     doc["offer"] = match err {
-        CliError::Refused(Error::Planar) => json!("planar"),
+        CliError::Refused(Error::Planar { .. }) => json!("planar"),
         CliError::Refused(Error::NotPlanar { .. }) => json!("3d"),
         _ => Value::Null,
     };
@@ -343,13 +343,14 @@ fn success(
         .collect();
     doc["calibrated"] = Value::Array(calibrated);
     doc["norms"] = Value::Array(norms);
-    // The core's sentence for each warning the fit reported.
+    // The core's sentence for each warning the fit reported, with its
+    // figure and limit.
     doc["warnings"] = o
         .quality
         .warnings
         .iter()
-        .filter_map(|name| Warning::ALL.into_iter().find(|w| w.name() == *name))
-        .map(|w| json!({ "name": w.name(), "text": w.to_string() }))
+        .zip(&o.quality.warning_texts)
+        .map(|(name, text)| json!({ "name": name, "text": text }))
         .collect();
     doc["snippets"] = json!({ "c": snippets::c(o), "rust": snippets::rust(o) });
     doc["packet"] = json!(packet::from_outcome(o).to_vec());

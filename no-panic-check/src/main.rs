@@ -582,6 +582,14 @@ fn ffi() {
             addr_of_mut!((*result).calibration),
         ));
         keep(magcal_error_str(opaque(&SCALARS_F32.window) as i32));
+        // The refusal the calls above left (any status and figures), into
+        // a buffer of any size up to its length, or none.
+        static mut MESSAGE: [u8; 256] = [0; 256];
+        keep(magcal_refusal_message(
+            maybe_null(addr_of!((*result).refusal)),
+            maybe_null(addr_of!(MESSAGE).cast::<core::ffi::c_char>()).cast_mut(),
+            count.min(256),
+        ));
     }
 }
 
