@@ -805,9 +805,9 @@ pub unsafe extern "C" fn magcal_smoother_push(
 
 /// Samples a `MagcalCollector` holds.
 pub const MAGCAL_COLLECTOR_CAPACITY: usize = 600;
-/// 8-byte words of a `MagcalCollector` (4 160 bytes: at least the Rust
-/// type's size on 64-bit hosts, 4 112; checked at build time).
-pub const MAGCAL_COLLECTOR_WORDS: usize = 520;
+/// 8-byte words of a `MagcalCollector` (4 224 bytes: at least the Rust
+/// type's size on 64-bit hosts, 4 192; checked at build time).
+pub const MAGCAL_COLLECTOR_WORDS: usize = 528;
 
 /// cbindgen:ignore
 type Coll = Collector<[i16; 3], MAGCAL_COLLECTOR_CAPACITY>;
@@ -830,7 +830,9 @@ pub struct MagcalCollector {
 pub enum MagcalOffer {
     /// Stored.
     Accepted = 0,
-    /// Refused: too close in direction to a stored one.
+    /// Refused: too close in direction to the last stored one, or not
+    /// moved beyond the sensor's noise since it was stored (a device lying
+    /// still; also the 2nd to 8th readings, while the noise is learnt).
     TooClose = 1,
     /// Refused: not finite.
     NotFinite = 2,
@@ -843,8 +845,9 @@ pub enum MagcalOffer {
     /// Refused: a null pointer.
     NullPointer = 6,
     /// The collection started over: every stored reading was discarded
-    /// and this one was not stored (a collection stalled by a device lying
-    /// still at the start, or by a wild reading among the first 20).
+    /// and this one was not stored (a collection from before the sensor
+    /// was moved elsewhere, or one stalled by a wild reading among the
+    /// first 20).
     Restarted = 7,
 }
 
