@@ -1148,4 +1148,88 @@ mod tests {
         }
         assert!((mean.abs() - 180.0).abs() < 1e-3, "{mean}");
     }
+
+    /// The C collector is the core's: a device lying still for 30 000
+    /// readings (a fixed reading plus about 2 counts of noise) keeps one
+    /// sample and is never ready; once it turns (a steady turn from pole
+    /// to pole), the collection completes without a restart and
+    /// calibrates.
+    #[test]
+    fn a_device_lying_still_never_makes_the_collector_ready() {
+        let mut c = Box::new(MagcalCollector {
+            storage: [0; MAGCAL_COLLECTOR_WORDS],
+        });
+        // SAFETY: valid, writable storage of the documented size.
+        assert_eq!(
+            unsafe { magcal_collector_init(&mut *c, 4.0) },
+            MagcalStatus::Ok
+        );
+        let progress = |c: &MagcalCollector| {
+            let mut p = MagcalProgress {
+                samples: 0,
+                cells_visited: 0,
+                cells: 0,
+                percent: 0,
+                ready: false,
+                visited: 0,
+            };
+            // SAFETY: set up above; `p` is writable.
+            assert_eq!(
+                unsafe { magcal_collector_progress(c, &mut p) },
+                MagcalStatus::Ok
+            );
+            p
+        };
+        let n = 600;
+        let mut phi = 0.0f32;
+        let turn: Vec<[i16; 3]> = (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - z * z).sqrt();
+                phi += 3.6 / (n as f32).sqrt() / r;
+                [
+                    (180.0 + 320.0 * r * phi.cos()).round() as i16,
+                    (-95.0 + 300.0 * r * phi.sin()).round() as i16,
+                    (240.0 + 340.0 * z).round() as i16,
+                ]
+            })
+            .collect();
+        let mut seed = 0x5eed_u64;
+        let mut noise = || {
+            // Sum of four uniforms in [-1.5, 1.5): about 1.7 counts.
+            (0..4)
+                .map(|_| {
+                    seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                    (seed >> 11) as f32 / (1u64 << 53) as f32 * 3.0 - 1.5
+                })
+                .sum::<f32>()
+        };
+        for _ in 0..30_000 {
+            let y = turn[0].map(|v| (f32::from(v) + noise()).round() as i16);
+            // SAFETY: set up above; three readable values.
+            let answer = unsafe { magcal_collector_offer(&mut *c, y.as_ptr()) };
+            assert!(matches!(
+                answer,
+                MagcalOffer::Accepted | MagcalOffer::TooClose
+            ));
+            assert!(!progress(&c).ready);
+        }
+        let p = progress(&c);
+        assert_eq!((p.samples, p.percent, p.ready), (1, 0, false), "{p:?}");
+        for y in &turn {
+            // SAFETY: as above.
+            let answer = unsafe { magcal_collector_offer(&mut *c, y.as_ptr()) };
+            assert_ne!(answer, MagcalOffer::Restarted);
+        }
+        let p = progress(&c);
+        assert!(p.ready, "{p:?}");
+        let mut count = 0usize;
+        // SAFETY: set up above; `count` is writable.
+        let samples = unsafe { magcal_collector_samples(&*c, &mut count) };
+        let mut r = core::mem::MaybeUninit::<MagcalResult>::uninit();
+        // SAFETY: `samples` holds `count` readings (valid until the next
+        // offer); `r` is writable.
+        let status = unsafe { magcal_calibrate_i16(samples, count, &config(), r.as_mut_ptr()) };
+        assert_eq!(status, MagcalStatus::Ok);
+    }
 }
