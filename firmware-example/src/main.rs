@@ -592,7 +592,7 @@ fn collect<I: I2c, D: DelayNs>(
                 Offer::Glitch => refused[0] += 1,
                 Offer::Outlier => refused[1] += 1,
                 Offer::Restarted => {
-                    warn!("the collector started over: its first samples were a noise ball (the board lying still) or held a wild reading");
+                    warn!("the collector started over: its samples were from before the sensor moved (every reading an outlier), or its first ones held a wild reading");
                     restart = true;
                 }
                 _ => {}

@@ -36,13 +36,15 @@
 //! The frame convention is NED: Earth field `F (cos dip, 0, sin dip)`
 //! (north, east, down); body axes x forward, y right, z down.
 //!
-//! - [`Motion::Sweep`]: the sensor is tumbled so that `h` follows a
-//!   spherical spiral from `+z` to `-z` (Saff and Kuijlaars' generalised
-//!   spiral) over `sweep_samples` samples, consecutive samples about 8 deg
-//!   apart; then back up, and so on. It covers the sphere evenly, which is
-//!   what a careful user turning the device in all directions achieves. Only
-//!   the body-frame direction of the field is observable by a magnetometer,
-//!   so the motion is specified by it.
+//! - [`Motion::Sweep`]: the sensor first lies still for `still_samples`
+//!   samples (at the direction the spiral starts from: a user who starts
+//!   the collection, then picks the device up), then is tumbled so that `h`
+//!   follows a spherical spiral from `+z` to `-z` (Saff and Kuijlaars'
+//!   generalised spiral) over `sweep_samples` samples, consecutive samples
+//!   about 8 deg apart; then back up, and so on. It covers the sphere
+//!   evenly, which is what a careful user turning the device in all
+//!   directions achieves. Only the body-frame direction of the field is
+//!   observable by a magnetometer, so the motion is specified by it.
 //! - [`Motion::LevelTurn`]: a compass swing. The sensor is level and stops at
 //!   `stops` headings `psi_j = offset + j 360 / stops` for `dwell` samples
 //!   each; then `h = (cos dip cos psi, -cos dip sin psi, sin dip)` and the
@@ -78,7 +80,8 @@
 //!   displaced ones are the core's to leave out.)
 //!
 //! I2C NACK bursts are purely a bus matter and live in the register model.
-//! The windows count samples from the start of a motion phase, so every
+//! The windows count samples from the start of a motion phase (of a
+//! collection: from the end of its still start), so every
 //! collection (a [`Motion::Sweep`]) and every compass swing
 //! ([`Motion::LevelTurn`]) meets the same faults. Each reading says which
 //! faults it carries ([`Reading::injected`]), and the simulator counts the
@@ -110,6 +113,9 @@ pub struct Scenario {
     pub noise: f64,
     /// Samples of one pole-to-pole pass of the sweep.
     pub sweep_samples: u32,
+    /// Samples the sensor lies still at the start of a sweep, before it
+    /// turns.
+    pub still_samples: u32,
     /// PRNG seed.
     pub seed: u64,
     /// Faults to inject ([`Faults::NONE`]: a clean sensor).
@@ -130,6 +136,7 @@ impl Scenario {
         hard_iron: [180.0, -95.0, 240.0],
         noise: 2.5,
         sweep_samples: 600,
+        still_samples: 0,
         seed: 0x6d61_672d_6361_6c21,
         faults: Faults::NONE,
     };
@@ -635,9 +642,28 @@ impl Simulator {
         self.spiral_phi = 0.0;
     }
 
+    /// Sample `k` of the current phase counted as its faults are: during a
+    /// sweep, from the end of its still start (`None` before it).
+    fn moving_sample(&self, k: u32) -> Option<u32> {
+        match self.motion {
+            Motion::Sweep => k.checked_sub(self.scenario.still_samples),
+            Motion::LevelTurn { .. } | Motion::OrdinaryUse => Some(k),
+        }
+    }
+
     /// The true field direction and heading (degrees) of the next sample.
     fn next_direction(&mut self) -> ([f64; 3], f64) {
-        let step = self.step;
+        let Some(step) = self.moving_sample(self.step) else {
+            // Lying still where the spiral starts (the direction of its
+            // first sample, without advancing it).
+            self.step = self.step.wrapping_add(1);
+            let n = self.scenario.sweep_samples.max(2);
+            let z = 1.0 - 1.0 / f64::from(n);
+            let r = libm::sqrt(1.0 - z * z);
+            let (s, c) = libm::sincos(3.6 / libm::sqrt(f64::from(n)) / r);
+            let h = [r * c, r * s, z];
+            return (h, heading_deg(&h));
+        };
         self.step = self.step.wrapping_add(1);
         match self.motion {
             Motion::Sweep => {
@@ -747,9 +773,13 @@ impl Simulator {
 
     /// The next sample.
     pub fn next_reading(&mut self) -> Reading {
-        let k = self.step;
+        let k = self.moving_sample(self.step);
         let (h, heading_deg) = self.next_direction();
-        let (injected, extra) = self.faults_at(k);
+        // No fault while a sweep's sensor lies still.
+        let (injected, extra) = match k {
+            Some(k) => self.faults_at(k),
+            None => (Injected::default(), [0.0; 3]),
+        };
         let th = mat_vec(&self.soft_iron, &h);
         let b = self.scenario.hard_iron;
         let mut counts = [0i16; 3];

@@ -563,6 +563,12 @@ pub type CalibrationStorage = FlashStorage<SimFlash>;
 /// Where the calibration is stored, for the log.
 pub const STORAGE_NAME: &str = "flash stand-in (4 KiB of RAM; QEMU has no NVMC)";
 
+/// Samples the simulated device lies still at the start of each collection
+/// before it turns: 20 s at the firmware's 20 Hz. The collector must not
+/// take its noise for coverage (it did before it learnt the sensor's
+/// noise: ready within 300 readings, and the calibration refused).
+pub const STILL_START: u32 = 400;
+
 /// The simulated hardware.
 pub struct Hardware {
     sensor: RefCell<SimLsm303agr>,
@@ -572,7 +578,9 @@ pub struct Hardware {
 
 impl Hardware {
     /// The sensor in its power-on state, simulating [`Scenario::DEFAULT`]
-    /// (with [`Faults::RUN`] in the fault run), and an erased flash page.
+    /// lying still for [`STILL_START`] samples at the start of each
+    /// collection (with [`Faults::RUN`] in the fault run), and an erased
+    /// flash page.
     pub fn take() -> Self {
         // Keep the marker in the ELF for `runner.sh`.
         core::hint::black_box(&QEMU_MARKER);
@@ -584,6 +592,7 @@ impl Hardware {
         Self {
             sensor: RefCell::new(SimLsm303agr::new(Scenario {
                 faults,
+                still_samples: STILL_START,
                 ..Scenario::DEFAULT
             })),
             delay: NoDelay,
@@ -613,16 +622,18 @@ pub struct Bench<'a> {
 }
 
 impl Bench<'_> {
-    /// Start tumbling the sensor over the sphere.
+    /// Start tumbling the sensor over the sphere (after it lies still for
+    /// the scenario's `still_samples`).
     pub fn begin_sweep(&mut self) {
         let mut dev = self.dev.borrow_mut();
         let sim = dev.simulator();
         let s = sim.scenario();
         defmt::info!(
-            "simulator: field {=f64} uT, dip {=f64} deg, noise {=f64} counts; tumbling the sensor over the sphere",
+            "simulator: field {=f64} uT, dip {=f64} deg, noise {=f64} counts; the sensor lies still for {=u32} samples, then tumbles over the sphere",
             s.field_nt / 1000.0,
             s.dip_deg,
-            s.noise
+            s.noise,
+            s.still_samples
         );
         sim.set_motion(Motion::Sweep);
     }

@@ -13,7 +13,8 @@
 //! [`Collector::offer`] costs the same for the first and the ten-thousandth
 //! sample, whatever `N`: a fixed update of running sums (about 40 flops),
 //! one 3x3 solve by cofactors (about 50 flops, one division), two
-//! normalisations (two square roots), and the re-classification of
+//! normalisations (two square roots), the noise estimate (about 30 flops,
+//! two square roots, see "Still devices"), and the re-classification of
 //! [`RESCAN_PER_OFFER`] = 4 stored samples in round robin (about 15 flops
 //! each, no square root). There is no loop over the stored samples, except
 //! once per collection over the first [`OUTLIER_MIN_SAMPLES`] (see
@@ -33,19 +34,75 @@
 //! disturbances (a magnet passing at a distance) are left to the
 //! calibration's own outlier handling.
 //!
+//! # Still devices
+//!
+//! A reading is kept only when the device has moved since the last sample
+//! kept by more than the sensor's noise: [`NOISE_SPACING`] = 10 standard
+//! deviations, measured on the readings smoothed over about 7 readings
+//! (exponential weight 1/4), and at least 3 quanta of quantised readings
+//! (3 counts for integer samples). Without this rule a device lying still
+//! when the collection starts filled the store: before the centre is known
+//! its noise points every way from a centre inside the noise, so 300
+//! readings filled the 36 cells readiness asks for, and the collector said
+//! ready on samples the core refuses.
+//!
+//! The noise is learnt from the readings themselves, whatever their unit:
+//! noise makes consecutive steps `d_k = y_k - y_(k-1)` point against each
+//! other (`E[d_k . d_(k-1)] = -3 sigma^2` for independent noise of
+//! `sigma` per axis), a turning device makes them point the same way. The
+//! estimate `sigma^2 = max(0, -mean(d_k . d_(k-1))) / 3` is therefore the
+//! noise of a device lying still and about zero for one that turns, even
+//! coarsely sampled: recordings at 11 deg a reading collect as fast as
+//! before. The mean takes evidence of noise quicker (weight 1/16) than it
+//! lets go of it (1/32), so a device that stops is soon recognised and one
+//! that starts turning is spaced at most by the noise; its inputs are
+//! clipped at 4 times their typical size (a wild reading moves it by a
+//! few noise levels). The first reading is stored at once, the next ones
+//! from the [`NOISE_READINGS`]-th (9th) reading on, when the estimate
+//! exists.
+//!
+//! Measured (`cargo test -p mag-cal-core --test collector -- --nocapture`,
+//! `a_device_lying_still_never_becomes_ready`: `i16`, 320-count field, 8
+//! seeds each): independent noise of 0.1, 0.3, 1, 2.5 and 3 counts for
+//! 300, 3 000 and 30 000 readings stores 1 sample; noise correlated from
+//! reading to reading (AR(1), as a low-pass filter makes it) at most 2
+//! (correlation 0.35), 3 (0.5) and 29 (0.7). On `f32` readings without
+//! quantisation (20 seeds, 30 000 readings) correlation 0.5 stored up to
+//! 19 samples and 0.7 up to 71: strongly filtered noise looks like slow
+//! motion, and the progress of such a device creeps up (it was never
+//! ready in these runs). Real recordings are not slowed (readings to
+//! ready with capacity 600, before the rule and after:
+//! `icm20948_mag_300.csv` 131 and 121, `mag3_raw_541.csv` 175 and 182,
+//! after a still start of 300 to 30 000 readings 128 and 182-186).
+//! `magcal_25598.txt` starts lying still: before, the collector said
+//! ready after 841 readings on a noise ball that did not calibrate; now,
+//! with capacity 4 000, after 4 953 readings on samples that calibrate
+//! (with 600 it fills at 35 cells: the recording turns mostly about one
+//! axis for its first 5 000 readings). `cargo test -p host-tests --test
+//! collector_real -- --nocapture`.
+//!
+//! The rule needs the readings in the order the sensor gave them, from a
+//! device that turns smoothly between readings: readings in random order
+//! (a shuffled log), or a device jerked to unrelated directions between
+//! readings, look like noise of the size of the field, and little is
+//! kept. Measured (field 320 counts, noise 2.3 counts, a random walk of
+//! the field direction with a fresh random step direction every reading,
+//! readings to ready before the rule and after): 5 deg steps 1 592 and
+//! 2 706, 10 deg 434 and 1 079, 20 deg 99 and 1 811, 30 deg 99 and never
+//! (3 000 readings); a steady turn is unaffected up to 60 deg a reading.
+//! A device turned by hand and read at 5 Hz or more turns smoothly between
+//! readings.
+//!
 //! # Stalls
 //!
-//! Two kinds of start leave a store that no later reading can extend, and
-//! the collector then starts over ([`Offer::Restarted`]: every sample is
-//! discarded, as by [`Collector::clear`]):
+//! Two kinds of collection leave a store that no later reading can extend,
+//! and the collector then starts over ([`Offer::Restarted`]: every sample
+//! is discarded, as by [`Collector::clear`]):
 //!
-//! - **A device lying still when the collection starts.** Before the
-//!   centre is known its noise points every way from the crude centre, so
-//!   a noise ball is stored; its radius is the noise, and every reading of
-//!   the device turning is then an outlier. After [`STALL_OFFERS`] outliers
-//!   in a row (and at least as many as there are samples) the store is
-//!   taken for the stale one, whether a noise ball or a collection from
-//!   before the sensor was moved to another place.
+//! - **A collection from before the sensor was moved** to another place
+//!   (another hard iron): every reading is an outlier of the store. After
+//!   [`STALL_OFFERS`] outliers in a row (and at least as many as there are
+//!   samples) the store is taken for the stale one.
 //! - **A wild reading among the first ones** (a sensor's start-up value
 //!   30 000 counts off). Before [`OUTLIER_MIN_SAMPLES`] samples there is no
 //!   outlier test, and such a reading drags the running centre so far that
@@ -56,10 +113,9 @@
 //!   [`WILD_SPREAD`] times the median distance from their per-axis median.
 //!
 //! A magnet held at the sensor for [`STALL_OFFERS`] readings (and more
-//! than the store holds) also restarts the collection. A collector that
-//! fills up with a noise ball (a device lying still for `N` readings from
-//! the start) stays full: [`Offer::Full`] is checked first, and
-//! [`crate::calibrate`] refuses such samples; call [`Collector::clear`].
+//! than the store holds) also restarts the collection. A device lying
+//! still is no stall: it stores nothing (see "Still devices"), and its
+//! readings do not count towards [`STALL_OFFERS`].
 //!
 //! # Numerical choices
 //!
@@ -108,8 +164,9 @@
 //! field of 300-500 counts: 0.2-0.5 deg), so a device held still adds no
 //! samples once the centre is known, while a cell (about 30 deg across)
 //! still gets about 7 samples on every pass. Slow motion is kept too, one
-//! sample per 4 deg turned. (Before the centre is known a device held
-//! still adds noise; see "Stalls".)
+//! sample per 4 deg turned. Before the centre is known, directions mean
+//! nothing for a device held still; the noise spacing (see "Still
+//! devices") keeps its readings out.
 //!
 //! **Cells.** The sphere is cut into [`BANDS`] = 6 zones of equal height in
 //! `z` and [`SECTORS`] = 8 sectors of 45 deg in longitude: [`CELLS`] = 48
@@ -248,6 +305,189 @@ pub const WILD_SPREAD: f32 = 8.0;
 /// No witness for a cell yet.
 const NO_WITNESS: usize = usize::MAX;
 
+/// A reading is a new sample only once the device has moved this many
+/// standard deviations of the sensor's noise (per axis) since the last
+/// sample stored, as the smoothed readings see it (see "Still devices" in
+/// the [module documentation](self)). At 2.5 counts of noise on a 320-count
+/// field that is 25 counts, 4.5 deg: about the [`DEFAULT_MIN_ANGLE_DEG`]
+/// spacing, so a device that turns is not slowed. The smoothed position of
+/// a still device moves by 0.53 standard deviations per axis between two
+/// readings far apart (independent noise), so 10 is beyond any excursion
+/// in 30 000 readings; it also leaves room for noise correlated from
+/// reading to reading, which the estimate sees smaller than it is (by the
+/// factor `1 - a` for correlation `a`).
+pub const NOISE_SPACING: f32 = 10.0;
+
+/// Readings the collector takes to learn the sensor's noise: it stores the
+/// first reading offered, and no other before this many have been offered
+/// (the noise estimate needs seven pairs of consecutive steps).
+pub const NOISE_READINGS: usize = 9;
+
+/// Quanta of quantised readings (the smallest change of a component seen
+/// between consecutive readings, one count for integer samples) a reading
+/// must also move: noise below one count shows as rare one-count toggles,
+/// which the noise estimate cannot see (without this floor a still `i16`
+/// device with 0.2-0.3 counts of noise filled a store of 600 in 30 000
+/// readings).
+const QUANTUM_SPACING: f32 = 3.0;
+
+/// Weight of a reading in the smoothed position the noise spacing is
+/// measured on: it averages the noise of about 7 readings (white noise:
+/// 0.38 of its standard deviation per axis). Measured on raw readings
+/// instead, a still `f32` device with noise correlated 0.7 from reading to
+/// reading stored up to 75 samples in 30 000 readings, smoothed up to 32
+/// (with the weights of an earlier trial, 1/16 and 1/128).
+const POSITION_WEIGHT: f32 = 0.25;
+
+/// Second differences whose smallest seeds the noise level: a wild reading
+/// among the first readings touches three of them.
+const NOISE_SEED: u8 = 4;
+
+/// Values over which the noise estimates settle (running means before).
+const NOISE_WARMUP: u8 = 16;
+
+/// Weight of a second difference in the mean second-difference length
+/// (after [`NOISE_WARMUP`]).
+const LEVEL_WEIGHT: f32 = 1.0 / 16.0;
+
+/// Weight of a product of consecutive steps in their mean when it points
+/// towards noise (more negative than the mean) and towards motion: the
+/// estimate takes noise in quicker than it lets go of it. The balance is
+/// measured (module documentation, "Still devices"): a weight of 1/16 both
+/// ways let a still device with noise correlated 0.5 from reading to
+/// reading become ready (221 samples of 600); 1/128 towards motion kept
+/// it below 25 % even at correlation 0.7 but collected nothing from a
+/// device jerked 10 deg a reading in random directions.
+const TOWARDS_NOISE: f32 = 1.0 / 16.0;
+/// See [`TOWARDS_NOISE`].
+const TOWARDS_MOTION: f32 = 1.0 / 32.0;
+
+/// A second difference, or a product of consecutive steps, enters its mean
+/// clipped at this many times the mean's typical size: a wild reading
+/// among the first ones moves the estimates by a few noise levels, not by
+/// its own size (unclipped, a wild second reading made the collector take
+/// every later reading for noise: the collection of
+/// `a_wild_reading_among_the_first_does_not_stall_the_collection` never
+/// got past one sample).
+const NOISE_CLIP: f32 = 4.0;
+
+/// What the collector knows about the sensor's noise, from every reading
+/// offered that passes the glitch and outlier checks.
+///
+/// Noise makes consecutive steps `d_k = y_k - y_(k-1)` point against each
+/// other: for independent noise of standard deviation `sigma` per axis,
+/// `E[d_k . d_(k-1)] = -3 sigma^2`, while a device turning smoothly makes
+/// them point the same way (`E = |v|^2 - 3 sigma^2`, `v` the step of the
+/// motion). So `sigma^2 = max(0, -mean(d_k . d_(k-1))) / 3` is the noise
+/// of a device lying still and about zero for one that turns, however
+/// coarsely sampled (steps up to 90 deg of a steady turn).
+#[derive(Clone, Copy, Debug)]
+struct NoiseGate {
+    /// The last reading.
+    last: [f32; 3],
+    /// The step to it from the one before.
+    step: [f32; 3],
+    /// The readings, smoothed ([`POSITION_WEIGHT`]).
+    position: [f32; 3],
+    /// Readings taken (saturating).
+    seen: u8,
+    /// Mean length of the second difference `d_k - d_(k-1)`: the scale
+    /// for clipping (`3.9 sigma` for noise).
+    level: f32,
+    /// Mean of `d_k . d_(k-1)`.
+    product: f32,
+    /// Smallest non-zero change of a component between consecutive
+    /// readings (infinite before one is seen).
+    quantum: f32,
+}
+
+impl NoiseGate {
+    const EMPTY: NoiseGate = NoiseGate {
+        last: [0.0; 3],
+        step: [0.0; 3],
+        position: [0.0; 3],
+        seen: 0,
+        level: 0.0,
+        product: 0.0,
+        quantum: f32::INFINITY,
+    };
+
+    /// Takes a (finite) reading; returns how far the smoothed position
+    /// must have moved since the last sample stored for the reading to be
+    /// new, or `None` while the noise is not known yet.
+    fn take(&mut self, y: [f32; 3]) -> Option<f32> {
+        self.seen = self.seen.saturating_add(1);
+        if self.seen == 1 {
+            (self.last, self.position) = (y, y);
+            return None;
+        }
+        let step = sub(y, self.last);
+        for ((p, &v), &d) in self.position.iter_mut().zip(&y).zip(&step) {
+            *p += POSITION_WEIGHT * (v - *p);
+            let d = d.abs();
+            if d > 0.0 && d < self.quantum {
+                self.quantum = d;
+            }
+        }
+        if self.seen >= 3 {
+            self.learn(step);
+        }
+        (self.last, self.step) = (y, step);
+        if usize::from(self.seen) < NOISE_READINGS {
+            return None;
+        }
+        let sigma = libm::sqrtf((-self.product / 3.0).max(0.0));
+        let quantum = if self.quantum.is_finite() {
+            QUANTUM_SPACING * self.quantum
+        } else {
+            0.0
+        };
+        Some((NOISE_SPACING * sigma).max(quantum))
+    }
+
+    /// Updates the means with the step `d_k` (the previous one is
+    /// `self.step`).
+    fn learn(&mut self, step: [f32; 3]) {
+        let bend = sub(step, self.step);
+        let s = libm::sqrtf(dot(&bend, &bend));
+        let p = dot(&step, &self.step);
+        if !s.is_finite() || !p.is_finite() {
+            return;
+        }
+        // Second differences taken, this one included (`seen >= 3`).
+        let k = self.seen.saturating_sub(2).max(1);
+        if k <= NOISE_SEED {
+            // A wild reading shows in three consecutive second differences:
+            // the smallest of the first four is one of noise or motion.
+            self.level = if k == 1 { s } else { self.level.min(s) };
+        } else {
+            let s = if self.level > 0.0 {
+                s.min(NOISE_CLIP * self.level)
+            } else {
+                s
+            };
+            let w = (1.0 / f32::from(k.saturating_sub(NOISE_SEED).max(1))).max(LEVEL_WEIGHT);
+            self.level += w * (s - self.level);
+        }
+        if k < NOISE_SEED {
+            return;
+        }
+        // For noise the product is typically 3 sigma^2 = level^2 / 5
+        // (level = 3.9 sigma); clipped at NOISE_CLIP times in amplitude.
+        let lim = NOISE_CLIP * NOISE_CLIP * self.level * self.level / 5.0;
+        let p = p.max(-lim).min(lim);
+        let j = k.saturating_sub(NOISE_SEED).saturating_add(1); // products taken
+        let w = if j <= NOISE_WARMUP {
+            1.0 / f32::from(j)
+        } else if p < self.product {
+            TOWARDS_NOISE
+        } else {
+            TOWARDS_MOTION
+        };
+        self.product += w * (p - self.product);
+    }
+}
+
 /// What [`Collector::offer`] did with a sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -257,7 +497,10 @@ pub enum Offer {
     Accepted,
     /// Refused: its direction from the running centre is within the minimum
     /// angle of the last stored sample's (this includes an exact repeat, and
-    /// a sample with no direction because it sits on the centre estimate).
+    /// a sample with no direction because it sits on the centre estimate),
+    /// or the device has not moved beyond the sensor's noise since that
+    /// sample was stored ([`NOISE_SPACING`]; every reading from the second
+    /// to the [`NOISE_READINGS`]-th, while the noise is learnt).
     TooClose,
     /// Refused: a component is NaN or infinite in `f32` (including `f64` or
     /// `i32` values beyond `f32`'s range), or the sample is so far from the
@@ -526,14 +769,15 @@ pub(crate) fn cell(v: [f32; 3]) -> Option<usize> {
 /// numerics).
 ///
 /// Capacity is the const generic `N`, stored inline: `N * size_of::<S>()`
-/// bytes plus about 320 bytes of state on a 32-bit target. With
+/// bytes plus about 384 bytes of state on a 32-bit target. With
 /// `S = [i16; 3]` a sample takes 6 bytes. Every method is bounded:
 /// [`Collector::offer`] is O(1) and [`Collector::progress`] O([`CELLS`]),
 /// independent of `N`.
 ///
 /// Wild readings are refused once [`OUTLIER_MIN_SAMPLES`] samples are
-/// stored ([`Offer::Outlier`]); one among the first samples, or a start
-/// lying still, makes the collection start over ([`Offer::Restarted`]).
+/// stored ([`Offer::Outlier`]); one among the first samples makes the
+/// collection start over ([`Offer::Restarted`]). A device lying still adds
+/// nothing ([`NOISE_SPACING`]).
 /// Moderate disturbances are kept: [`crate::calibrate`] judges the stored
 /// samples on its own.
 ///
@@ -580,6 +824,18 @@ pub struct Collector<S: Sample, const N: usize> {
     /// [`OUTLIER_MIN_SAMPLES`] samples are stored, since the last one
     /// stored.
     close_in_row: usize,
+    /// The sensor's noise, learnt from the readings offered.
+    noise: NoiseGate,
+    /// The smoothed position ([`NoiseGate`]) when the last sample was
+    /// stored.
+    anchor: [f32; 3],
+}
+
+/// [`Collector::offer_inner`]'s answer: an [`Offer`], or a reading within
+/// the noise of the last sample stored (answered as [`Offer::TooClose`]).
+enum Verdict {
+    Offer(Offer),
+    Still,
 }
 
 impl<S: Sample, const N: usize> Default for Collector<S, N> {
@@ -616,6 +872,8 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             cursor: 0,
             outliers_in_row: 0,
             close_in_row: 0,
+            noise: NoiseGate::EMPTY,
+            anchor: [0.0; 3],
         }
     }
 
@@ -636,16 +894,27 @@ impl<S: Sample, const N: usize> Collector<S, N> {
     /// (about 1 700 comparisons; the same whatever `N`).
     ///
     /// ```
-    /// use mag_cal_core::collector::{Collector, Offer};
+    /// use mag_cal_core::collector::{Collector, Offer, NOISE_READINGS};
     /// let mut c: Collector<[f32; 3], 2> = Collector::default();
     /// assert_eq!(c.offer([f32::NAN, 0.0, 0.0]), Offer::NotFinite);
-    /// assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted);
-    /// assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::TooClose);
-    /// assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted);
-    /// assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::Full);
+    /// // A device turning 10 deg a reading: the first reading is stored,
+    /// // the next ones once the collector knows the sensor's noise.
+    /// let turn = |k: usize| {
+    ///     let a = (10 * k) as f32 * core::f32::consts::PI / 180.0;
+    ///     [300.0 * a.cos(), 300.0 * a.sin(), 50.0]
+    /// };
+    /// assert_eq!(c.offer(turn(0)), Offer::Accepted);
+    /// for k in 1..NOISE_READINGS - 1 {
+    ///     assert_eq!(c.offer(turn(k)), Offer::TooClose);
+    /// }
+    /// assert_eq!(c.offer(turn(NOISE_READINGS - 1)), Offer::Accepted);
+    /// assert_eq!(c.offer(turn(NOISE_READINGS)), Offer::Full);
     /// ```
     pub fn offer(&mut self, sample: S) -> Offer {
-        let mut outcome = self.offer_inner(sample);
+        let (mut outcome, still) = match self.offer_inner(sample) {
+            Verdict::Offer(o) => (o, false),
+            Verdict::Still => (Offer::TooClose, true),
+        };
         let len = self.samples.len();
         let stalled = match outcome {
             Offer::Accepted => {
@@ -655,7 +924,9 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             }
             Offer::TooClose => {
                 self.outliers_in_row = 0;
-                if len < OUTLIER_MIN_SAMPLES {
+                // A device lying still is no stall: only readings that
+                // moved but point the same way from the centre count.
+                if len < OUTLIER_MIN_SAMPLES && !still {
                     self.close_in_row = self.close_in_row.saturating_add(1);
                 }
                 self.close_in_row >= STALL_OFFERS
@@ -701,27 +972,35 @@ impl<S: Sample, const N: usize> Collector<S, N> {
     }
 
     /// [`Collector::offer`] without the re-classification step.
-    fn offer_inner(&mut self, sample: S) -> Offer {
+    fn offer_inner(&mut self, sample: S) -> Verdict {
         if self.samples.is_full() {
-            return Offer::Full;
+            return Verdict::Offer(Offer::Full);
         }
         let y = sample.xyz::<f32>();
         if !y.iter().all(|v| v.is_finite()) {
-            return Offer::NotFinite;
+            return Verdict::Offer(Offer::NotFinite);
         }
         if sample.is_zero() || sample.on_rails() {
-            return Offer::Glitch;
+            return Verdict::Offer(Offer::Glitch);
         }
         if self.samples.len() >= OUTLIER_MIN_SAMPLES {
             let d = sub(y, self.centre);
             let r_sq = self.fit.radius_sq(self.centre);
             if dot(&d, &d) > OUTLIER_RADII * OUTLIER_RADII * r_sq {
-                return Offer::Outlier;
+                return Verdict::Offer(Offer::Outlier);
             }
         }
         let Some(fit) = self.fit.with(y) else {
-            return Offer::NotFinite;
+            return Verdict::Offer(Offer::NotFinite);
         };
+        let spacing = self.noise.take(y);
+        if !self.samples.is_empty() {
+            let moved = sub(self.noise.position, self.anchor);
+            let far = spacing.is_some_and(|d| dot(&moved, &moved) >= d * d);
+            if !far {
+                return Verdict::Still;
+            }
+        }
         let centre = fit.centre();
         let new_dir = direction(y, centre);
         let last_dir = self
@@ -738,18 +1017,19 @@ impl<S: Sample, const N: usize> Collector<S, N> {
             }
         };
         if !accept && !self.samples.is_empty() {
-            return Offer::TooClose;
+            return Verdict::Offer(Offer::TooClose);
         }
         let index = self.samples.len();
         if self.samples.push(sample).is_err() {
-            return Offer::Full;
+            return Verdict::Offer(Offer::Full);
         }
         self.fit = fit;
         self.centre = centre;
+        self.anchor = self.noise.position;
         if let Some(w) = cell(sub(y, centre)).and_then(|c| self.witness.get_mut(c)) {
             *w = index;
         }
-        Offer::Accepted
+        Verdict::Offer(Offer::Accepted)
     }
 
     /// Re-classifies the next [`RESCAN_PER_OFFER`] stored samples (round
@@ -846,6 +1126,8 @@ impl<S: Sample, const N: usize> Collector<S, N> {
         self.cursor = 0;
         self.outliers_in_row = 0;
         self.close_in_row = 0;
+        self.noise = NoiseGate::EMPTY;
+        self.anchor = [0.0; 3];
     }
 
     /// Number of stored samples.

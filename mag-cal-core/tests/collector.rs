@@ -1,7 +1,8 @@
 //! The on-device collector: acceptance, coverage, readiness, capacity.
 
 use mag_cal_core::collector::{
-    Collector, Offer, CELLS, DEFAULT_MIN_ANGLE_DEG, READY_CELLS, READY_SAMPLES, STALL_OFFERS,
+    Collector, Offer, CELLS, DEFAULT_MIN_ANGLE_DEG, NOISE_READINGS, READY_CELLS, READY_SAMPLES,
+    STALL_OFFERS,
 };
 use mag_cal_core::{calibrate, Config};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -200,6 +201,17 @@ fn caps_are_not_mistaken_for_the_sphere() {
     }
 }
 
+/// Noise-free readings of a device turning about z by `step` radians a
+/// reading (a field of 100 units around the origin).
+fn turning(n: usize, step: f32) -> Vec<[f32; 3]> {
+    (0..n)
+        .map(|k| {
+            let a = k as f32 * step;
+            [100.0 * a.cos(), 100.0 * a.sin(), 30.0]
+        })
+        .collect()
+}
+
 #[test]
 fn identical_samples_are_too_close_after_the_first() {
     let mut c: Collector<[i16; 3], 100> = Collector::default();
@@ -208,14 +220,22 @@ fn identical_samples_are_too_close_after_the_first() {
         assert_eq!(c.offer([100, 200, 300]), Offer::TooClose);
     }
     assert_eq!(c.len(), 1);
-    // Also later, and with a minimum angle of zero.
+    // Also later, and with a minimum angle of zero: a device turning 10 deg
+    // a reading is kept from the end of the noise estimate's warm-up on,
+    // and an exact repeat of the last sample is refused.
     let mut c: Collector<[f32; 3], 100> = Collector::new(0.0);
-    assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted);
-    assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted);
-    assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::TooClose);
-    assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::Accepted);
-    assert_eq!(c.offer([0.0, 1.0, 0.0]), Offer::TooClose);
-    assert_eq!(c.len(), 3);
+    let path = turning(20, 10f32.to_radians());
+    let answers: Vec<Offer> = path.iter().map(|&y| c.offer(y)).collect();
+    assert_eq!(answers[0], Offer::Accepted);
+    assert!(answers[1..NOISE_READINGS - 1]
+        .iter()
+        .all(|&a| a == Offer::TooClose));
+    assert!(answers[NOISE_READINGS - 1..]
+        .iter()
+        .all(|&a| a == Offer::Accepted));
+    let last = *c.samples().last().unwrap();
+    assert_eq!(c.offer(last), Offer::TooClose);
+    assert_eq!(c.len(), 2 + path.len() - NOISE_READINGS);
 }
 
 #[test]
@@ -289,7 +309,8 @@ fn non_finite_samples_are_refused() {
     assert_eq!(c.offer([1.0, 2.0, f32::NEG_INFINITY]), Offer::NotFinite);
     assert!(c.is_empty() && c.centre().is_none());
     assert_eq!(c.offer([1.0, 2.0, 3.0]), Offer::Accepted);
-    // Finite but so far away that the sums would overflow f32.
+    // Finite but so far away that the sums would overflow f32 (before the
+    // noise estimate, which never sees them).
     assert_eq!(c.offer([1e30, 0.0, 0.0]), Offer::NotFinite);
     assert_eq!(c.offer([f32::MAX, f32::MAX, f32::MAX]), Offer::NotFinite);
     assert_eq!(c.len(), 1);
@@ -303,14 +324,21 @@ fn non_finite_samples_are_refused() {
 
 #[test]
 fn capacity_is_respected() {
-    let mut c: Collector<[i16; 3], 3> = Collector::default();
+    let mut c: Collector<[f32; 3], 3> = Collector::default();
     assert_eq!((c.len(), c.capacity(), c.is_empty()), (0, 3, true));
-    assert_eq!(c.offer([100, 0, 0]), Offer::Accepted);
-    assert_eq!(c.offer([-100, 0, 0]), Offer::Accepted);
-    assert_eq!(c.offer([0, 100, 0]), Offer::Accepted);
-    assert_eq!(c.offer([0, -100, 0]), Offer::Full);
-    assert_eq!(c.offer([0, 0, 100]), Offer::Full);
-    assert_eq!(c.samples(), &[[100, 0, 0], [-100, 0, 0], [0, 100, 0]]);
+    let answers: Vec<Offer> = turning(NOISE_READINGS + 4, 0.5)
+        .into_iter()
+        .map(|y| c.offer(y))
+        .collect();
+    // The first reading, two after the warm-up, then full.
+    assert_eq!(answers[0], Offer::Accepted);
+    assert_eq!(answers[NOISE_READINGS - 1], Offer::Accepted);
+    assert_eq!(answers[NOISE_READINGS], Offer::Accepted);
+    assert!(answers[NOISE_READINGS + 1..]
+        .iter()
+        .all(|&a| a == Offer::Full));
+    assert_eq!(c.len(), 3);
+    assert_eq!(c.offer([0.0, 0.0, 100.0]), Offer::Full);
     // Full before anything else, even for a NaN.
     let mut f: Collector<[f32; 3], 1> = Collector::default();
     assert_eq!(f.offer([0.0, 0.0, 1.0]), Offer::Accepted);
@@ -325,7 +353,7 @@ fn capacity_is_respected() {
         (p.samples, p.cells_visited, p.percent, p.ready),
         (0, 0, 0, false)
     );
-    assert_eq!(c.offer([0, -100, 0]), Offer::Accepted);
+    assert_eq!(c.offer([0.0, -100.0, 0.0]), Offer::Accepted);
     // Capacity zero: always full, never ready.
     let mut z: Collector<[i16; 3], 0> = Collector::default();
     assert_eq!(z.offer([1, 2, 3]), Offer::Full);
@@ -361,15 +389,14 @@ fn works_at_capacity_2000() {
 fn percent_combines_cells_and_count() {
     // Every cell of a collector of capacity 50 reached with 50 samples:
     // count fraction 100 % (capacity below READY_SAMPLES), cells decide.
+    // A fast, noise-free turn from pole to pole (one sample a reading once
+    // the noise is known: the first readings stay near the pole).
     let mut sensor = Sensor::new(false);
     sensor.noise = 0.0;
     let mut c: Collector<[i16; 3], 50> = Collector::default();
-    // Fibonacci directions: far apart, evenly spread.
-    for i in 0..50 {
-        let z = 1.0 - 2.0 * (i as f64 + 0.5) / 50.0;
-        let r = (1.0 - z * z).sqrt();
-        let phi = i as f64 * 2.399_963_229_728_653;
-        c.offer(sensor.read(&Vector3::new(r * phi.cos(), r * phi.sin(), z)));
+    let start = spiral(1.0, 0.99, NOISE_READINGS - 1, 0.1);
+    for h in start.iter().chain(&spiral(0.98, -1.0, 52, 1.2)) {
+        c.offer(sensor.read(h));
     }
     for _ in 0..100 {
         c.offer([0, 0, 0]); // Full; refreshes the coverage
@@ -395,10 +422,17 @@ fn min_angle_arguments_are_sanitised() {
         DEFAULT_MIN_ANGLE_DEG,
     ] {
         let mut c: Collector<[f32; 3], 8> = Collector::new(a);
-        assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::Accepted, "{a}");
-        assert_eq!(c.offer([1.0, 0.0, 0.0]), Offer::TooClose, "{a}");
-        // Antipodes are 180 deg apart: kept at every minimum angle.
-        assert_eq!(c.offer([-1.0, 0.0, 0.0]), Offer::Accepted, "{a}");
+        let path = turning(NOISE_READINGS - 1, 0.3);
+        assert_eq!(c.offer(path[0]), Offer::Accepted, "{a}");
+        assert_eq!(c.offer(path[0]), Offer::TooClose, "{a}");
+        for &y in &path[2..] {
+            c.offer(y);
+        }
+        // With one sample stored, the centre is that sample: any direction
+        // is new, at every minimum angle (even 180 deg).
+        assert_eq!(c.len(), 1, "{a}");
+        assert_eq!(c.offer([-100.0, 0.0, 30.0]), Offer::Accepted, "{a}");
+        assert_eq!(c.offer([-100.0, 0.0, 30.0]), Offer::TooClose, "{a}");
     }
 }
 
@@ -513,26 +547,101 @@ fn clean_motion_never_restarts() {
     }
 }
 
-/// A device lying still when the collection starts stores a noise ball
-/// (its noise points every way from the crude first centre); once it turns,
-/// every reading is an outlier of that ball, and the collection starts over
-/// and then fills as usual.
+/// Readings of a device lying still: the field direction `h` plus
+/// independent noise of `sigma` counts per axis (or noise that is
+/// correlated from reading to reading by `a`, an AR(1) process with the
+/// same standard deviation), rounded to counts.
+fn still(sensor: &mut Sensor, h: &Vector3<f64>, n: usize, sigma: f64, a: f64) -> Vec<[i16; 3]> {
+    let mut e = Vector3::zeros();
+    let innovation = sigma * (1.0 - a * a).sqrt();
+    (0..n)
+        .map(|_| {
+            let g = Vector3::new(sensor.rng.gauss(), sensor.rng.gauss(), sensor.rng.gauss());
+            e = e * a + g * innovation;
+            let y = sensor.b + sensor.t * h * sensor.rho + e;
+            [y.x.round() as i16, y.y.round() as i16, y.z.round() as i16]
+        })
+        .collect()
+}
+
+/// A device lying still, however long and whatever its noise, stores
+/// (almost) nothing: its progress stays near 0 and it is never ready.
+/// Before, its noise, pointing every way from a centre inside it, filled
+/// the 36 cells readiness asks for within 300 readings.
+#[test]
+fn a_device_lying_still_never_becomes_ready() {
+    let h = Vector3::new(0.3, -0.5, 0.8).normalize();
+    // Independent noise from a tenth of a count (readings that toggle a
+    // count now and then) to 3 counts, and noise correlated from reading
+    // to reading (a sensor's low-pass filter, a host's smoothing).
+    let cases = [
+        (0.1, 0.0, 5),
+        (0.3, 0.0, 5),
+        (1.0, 0.0, 5),
+        (2.5, 0.0, 5),
+        (3.0, 0.0, 5),
+        (2.5, 0.35, 15),
+        (2.5, 0.5, 25),
+        (2.5, 0.7, 35),
+    ];
+    for (sigma, a, max_percent) in cases {
+        for n in [300, 3_000, 30_000] {
+            let mut worst = 0;
+            for seed in 0..8 {
+                let mut sensor = Sensor::new(true);
+                sensor.rng = Rng(seed * 7919 + 1);
+                let mut c: Collector<[i16; 3], 600> = Collector::default();
+                let mut restarts = 0;
+                for y in still(&mut sensor, &h, n, sigma, a) {
+                    restarts += usize::from(c.offer(y) == Offer::Restarted);
+                    assert!(!c.is_ready(), "sigma {sigma}, a {a}, {n} readings");
+                }
+                let p = c.progress();
+                assert_eq!(restarts, 0);
+                assert!(p.percent <= max_percent, "sigma {sigma}, a {a}: {p:?}");
+                worst = worst.max(p.samples);
+            }
+            println!(
+                "sigma {sigma} counts, correlation {a}, {n} readings: at most {worst} samples"
+            );
+        }
+    }
+}
+
+/// A device lying still when the collection starts (for up to 30 000
+/// readings, 25 min at 20 Hz) stores one sample; once it turns, the
+/// collection fills as if it had started then.
 #[test]
 fn a_device_lying_still_at_first_does_not_stall_the_collection() {
-    for still in [30, 300] {
+    let dirs = spiral(1.0, -1.0, 900, 0.25);
+    let mut alone: Collector<[i16; 3], 1000> = Collector::default();
+    let ready_alone = feed(&mut alone, &mut Sensor::new(true), &dirs).unwrap();
+    for n in [30, 300, 3_000, 30_000] {
         let mut sensor = Sensor::new(true);
+        let sigma = sensor.noise;
         let h = Vector3::new(0.3, -0.5, 0.8).normalize();
         let mut c: Collector<[i16; 3], 1000> = Collector::default();
-        assert_eq!(restarts(&mut c, &mut sensor, &vec![h; still]), 0);
-        let ball = c.len();
-        // Every way from the crude centre: most of the noise is stored.
-        assert!(ball > still / 3, "{ball} of {still}");
-        assert!(calibrate::<f32, _>(c.samples(), &Config::default()).is_err());
-        let n = restarts(&mut c, &mut sensor, &spiral(1.0, -1.0, 900, 0.25));
+        for y in still(&mut sensor, &h, n, sigma, 0.0) {
+            assert_ne!(c.offer(y), Offer::Restarted);
+        }
         let p = c.progress();
-        println!("still {still}: ball {ball}, {n} restart(s), {p:?}");
-        assert_eq!(n, 1);
+        assert!(p.samples <= 2 && p.percent <= 2, "{p:?}");
+        let mut restarts = 0;
+        let mut ready_at = None;
+        for (k, h) in dirs.iter().enumerate() {
+            restarts += usize::from(c.offer(sensor.read(h)) == Offer::Restarted);
+            if ready_at.is_none() && c.is_ready() {
+                ready_at = Some(k);
+            }
+        }
+        let p = c.progress();
+        println!(
+            "still {n}: ready {ready_at:?} readings into the turn (alone {ready_alone}), {restarts} restart(s), {p:?}"
+        );
+        assert_eq!(restarts, 0);
         assert!(p.ready, "{p:?}");
+        let at = ready_at.expect("never ready");
+        assert!(at <= ready_alone + 20, "{at} against {ready_alone}");
         let e = hard_iron_error(&c, &sensor);
         assert!(e < 0.005, "{e}");
     }

@@ -42,9 +42,9 @@
 // Samples a `MagcalCollector` holds.
 #define MAGCAL_COLLECTOR_CAPACITY 600
 
-// 8-byte words of a `MagcalCollector` (4 160 bytes: at least the Rust
-// type's size on 64-bit hosts, 4 112; checked at build time).
-#define MAGCAL_COLLECTOR_WORDS 520
+// 8-byte words of a `MagcalCollector` (4 224 bytes: at least the Rust
+// type's size on 64-bit hosts, 4 192; checked at build time).
+#define MAGCAL_COLLECTOR_WORDS 528
 
 // Bytes of a stored calibration (`magcal_to_bytes`).
 #define MAGCAL_RECORD_BYTES 92
@@ -140,7 +140,9 @@ typedef enum {
 typedef enum {
   // Stored.
   MAGCAL_OFFER_ACCEPTED = 0,
-  // Refused: too close in direction to a stored one.
+  // Refused: too close in direction to the last stored one, or not
+  // moved beyond the sensor's noise since it was stored (a device lying
+  // still; also the 2nd to 8th readings, while the noise is learnt).
   MAGCAL_OFFER_TOO_CLOSE = 1,
   // Refused: not finite.
   MAGCAL_OFFER_NOT_FINITE = 2,
@@ -153,8 +155,9 @@ typedef enum {
   // Refused: a null pointer.
   MAGCAL_OFFER_NULL_POINTER = 6,
   // The collection started over: every stored reading was discarded
-  // and this one was not stored (a collection stalled by a device lying
-  // still at the start, or by a wild reading among the first 20).
+  // and this one was not stored (a collection from before the sensor
+  // was moved elsewhere, or one stalled by a wild reading among the
+  // first 20).
   MAGCAL_OFFER_RESTARTED = 7,
 } MagcalOffer;
 

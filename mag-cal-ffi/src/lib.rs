@@ -1195,9 +1195,9 @@ pub unsafe extern "C" fn magcal_smoother_push(
 
 /// Samples a `MagcalCollector` holds.
 pub const MAGCAL_COLLECTOR_CAPACITY: usize = 600;
-/// 8-byte words of a `MagcalCollector` (4 160 bytes: at least the Rust
-/// type's size on 64-bit hosts, 4 112; checked at build time).
-pub const MAGCAL_COLLECTOR_WORDS: usize = 520;
+/// 8-byte words of a `MagcalCollector` (4 224 bytes: at least the Rust
+/// type's size on 64-bit hosts, 4 192; checked at build time).
+pub const MAGCAL_COLLECTOR_WORDS: usize = 528;
 
 /// cbindgen:ignore
 type Coll = Collector<[i16; 3], MAGCAL_COLLECTOR_CAPACITY>;
@@ -1220,7 +1220,9 @@ pub struct MagcalCollector {
 pub enum MagcalOffer {
     /// Stored.
     Accepted = 0,
-    /// Refused: too close in direction to a stored one.
+    /// Refused: too close in direction to the last stored one, or not
+    /// moved beyond the sensor's noise since it was stored (a device lying
+    /// still; also the 2nd to 8th readings, while the noise is learnt).
     TooClose = 1,
     /// Refused: not finite.
     NotFinite = 2,
@@ -1233,8 +1235,9 @@ pub enum MagcalOffer {
     /// Refused: a null pointer.
     NullPointer = 6,
     /// The collection started over: every stored reading was discarded
-    /// and this one was not stored (a collection stalled by a device lying
-    /// still at the start, or by a wild reading among the first 20).
+    /// and this one was not stored (a collection from before the sensor
+    /// was moved elsewhere, or one stalled by a wild reading among the
+    /// first 20).
     Restarted = 7,
 }
 
@@ -1777,5 +1780,89 @@ mod tests {
             }
         }
         assert!((mean.abs() - 180.0).abs() < 1e-3, "{mean}");
+    }
+
+    /// The C collector is the core's: a device lying still for 30 000
+    /// readings (a fixed reading plus about 2 counts of noise) keeps one
+    /// sample and is never ready; once it turns (a steady turn from pole
+    /// to pole), the collection completes without a restart and
+    /// calibrates.
+    #[test]
+    fn a_device_lying_still_never_makes_the_collector_ready() {
+        let mut c = Box::new(MagcalCollector {
+            storage: [0; MAGCAL_COLLECTOR_WORDS],
+        });
+        // SAFETY: valid, writable storage of the documented size.
+        assert_eq!(
+            unsafe { magcal_collector_init(&mut *c, 4.0) },
+            MagcalStatus::Ok
+        );
+        let progress = |c: &MagcalCollector| {
+            let mut p = MagcalProgress {
+                samples: 0,
+                cells_visited: 0,
+                cells: 0,
+                percent: 0,
+                ready: false,
+                visited: 0,
+            };
+            // SAFETY: set up above; `p` is writable.
+            assert_eq!(
+                unsafe { magcal_collector_progress(c, &mut p) },
+                MagcalStatus::Ok
+            );
+            p
+        };
+        let n = 600;
+        let mut phi = 0.0f32;
+        let turn: Vec<[i16; 3]> = (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - z * z).sqrt();
+                phi += 3.6 / (n as f32).sqrt() / r;
+                [
+                    (180.0 + 320.0 * r * phi.cos()).round() as i16,
+                    (-95.0 + 300.0 * r * phi.sin()).round() as i16,
+                    (240.0 + 340.0 * z).round() as i16,
+                ]
+            })
+            .collect();
+        let mut seed = 0x5eed_u64;
+        let mut noise = || {
+            // Sum of four uniforms in [-1.5, 1.5): about 1.7 counts.
+            (0..4)
+                .map(|_| {
+                    seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                    (seed >> 11) as f32 / (1u64 << 53) as f32 * 3.0 - 1.5
+                })
+                .sum::<f32>()
+        };
+        for _ in 0..30_000 {
+            let y = turn[0].map(|v| (f32::from(v) + noise()).round() as i16);
+            // SAFETY: set up above; three readable values.
+            let answer = unsafe { magcal_collector_offer(&mut *c, y.as_ptr()) };
+            assert!(matches!(
+                answer,
+                MagcalOffer::Accepted | MagcalOffer::TooClose
+            ));
+            assert!(!progress(&c).ready);
+        }
+        let p = progress(&c);
+        assert_eq!((p.samples, p.percent, p.ready), (1, 0, false), "{p:?}");
+        for y in &turn {
+            // SAFETY: as above.
+            let answer = unsafe { magcal_collector_offer(&mut *c, y.as_ptr()) };
+            assert_ne!(answer, MagcalOffer::Restarted);
+        }
+        let p = progress(&c);
+        assert!(p.ready, "{p:?}");
+        let mut count = 0usize;
+        // SAFETY: set up above; `count` is writable.
+        let samples = unsafe { magcal_collector_samples(&*c, &mut count) };
+        let mut r = core::mem::MaybeUninit::<MagcalResult>::uninit();
+        // SAFETY: `samples` holds `count` readings (valid until the next
+        // offer); `r` is writable.
+        let status = unsafe { magcal_calibrate_i16(samples, count, &config(), r.as_mut_ptr()) };
+        assert_eq!(status, MagcalStatus::Ok);
     }
 }

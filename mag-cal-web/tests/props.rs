@@ -27,13 +27,16 @@ fn line() -> impl Strategy<Value = String> {
 }
 
 /// A sphere's worth of `Raw:` lines about an offset, with the cases'
-/// corruption mixed in: enough to reach a fit.
+/// corruption mixed in: enough to reach a fit. In the order of a board
+/// turned steadily from pole to pole (the collector learns the sensor's
+/// noise from consecutive readings).
 fn sphere_lines(n: usize, offset: [f64; 3]) -> Vec<String> {
+    let mut phi = 0.0f64;
     (0..n)
         .map(|i| {
             let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
             let r = (1.0 - z * z).sqrt();
-            let phi = i as f64 * 2.399_963;
+            phi += 3.6 / (n as f64).sqrt() / r;
             let m = [r * phi.cos(), r * phi.sin(), z];
             format!(
                 "Raw:0,0,0,0,0,0,{:.0},{:.0},{:.0}",
@@ -127,4 +130,51 @@ proptest! {
         // a calibration, however bad the lines.
         prop_assert_eq!(doc["status"].as_str(), Some("ok"), "{}", doc["message"]);
     }
+}
+
+/// The page's live collector is the core's: a board lying still (a fixed
+/// reading plus 2 counts of noise, 30 000 `Raw:` lines) keeps one sample,
+/// never gets ready, and its progress stays at 1 %; once it turns, the
+/// collection completes and fits.
+#[test]
+fn a_board_lying_still_never_gets_ready() {
+    let mut live = Live::default();
+    let turn = sphere_lines(600, [150.0, -60.0, 300.0]);
+    let first: Vec<f64> = turn[0]
+        .trim_start_matches("Raw:")
+        .split(',')
+        .skip(6)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let mut seed = 0x5eed_u64;
+    let mut noise = || {
+        // Sum of four uniforms in [-1.5, 1.5): about 1.7 counts.
+        (0..4)
+            .map(|_| {
+                seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                (seed >> 11) as f64 / (1u64 << 53) as f64 * 3.0 - 1.5
+            })
+            .sum::<f64>()
+    };
+    for _ in 0..30_000 {
+        let line = format!(
+            "Raw:0,0,0,0,0,0,{:.0},{:.0},{:.0}",
+            first[0] + noise(),
+            first[1] + noise(),
+            first[2] + noise()
+        );
+        let doc: Value = serde_json::from_str(&live.line(line.as_bytes())).unwrap();
+        assert_eq!(doc["progress"]["ready"], false);
+    }
+    let p = live.progress_json();
+    assert_eq!(p["samples"], 1, "{p}");
+    assert!(p["percent"].as_u64() <= Some(1), "{p}");
+    for line in &turn {
+        let _ = live.line(line.as_bytes());
+    }
+    let p = live.progress_json();
+    assert_eq!(p["ready"], true, "{p}");
+    assert_eq!(p["refused"]["restarted"], 0, "{p}");
+    let (code, text) = live.fit(b"", &|| 0.0);
+    assert_eq!(code, 0, "{text}");
 }
