@@ -228,15 +228,27 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
     }
 }
 
-/// The error line for the page: the CLI's, but for a refusal as planar,
-/// whose advice names `magcal planar`: the page's planar fit instead.
+/// The error line for the page: the CLI's, but in the page's terms. A
+/// refusal as planar, whose advice names `magcal planar`, names the page's
+/// planar fit instead; the reader's advice to pass `--columns` names the
+/// page's columns box.
 pub fn message(err: &CliError) -> String {
     match err {
         CliError::Refused(cause @ Error::Planar { .. }) => format!(
             "calibration refused: {cause} (a device that turns about one axis only: fit it as planar)"
         ),
-        _ => err.to_string(),
+        _ => in_page_terms(&err.to_string()),
     }
+}
+
+/// `text` with the CLI's `--columns` option named as the page's columns
+/// box (the page has no `--accel-columns`: it never reads accelerometers).
+fn in_page_terms(text: &str) -> String {
+    text.replace("pass --columns with", "fill the columns box with")
+        .replace("pass --columns", "fill the columns box with")
+        .replace("--columns does not apply", "the columns box does not apply")
+        .replace("--columns)", "columns box)")
+        .replace("--columns ", "")
 }
 
 /// The JSON of a refused or failed fit, and its exit code.
@@ -754,6 +766,15 @@ mod tests {
         let (code, text) = fit_json(b"a,b,c,d\n1,2,3,4\n", b"", &|| 0.0);
         let doc: Value = serde_json::from_str(&text).unwrap();
         assert_eq!((code, doc["status"].as_str()), (2, Some("error")), "{text}");
+        // The reader's advice names the page's columns box, not an option.
+        let wide = "1,2,3,4,5,6,7,8,9\n2,3,4,5,6,7,8,9,1\n";
+        for input in [&b"a,b,c,d\n1,2,3,4\n"[..], wide.as_bytes()] {
+            let (code, text) = fit_json(input, b"", &|| 0.0);
+            let doc: Value = serde_json::from_str(&text).unwrap();
+            let msg = doc["message"].as_str().unwrap();
+            assert_eq!(code, 2, "{text}");
+            assert!(msg.contains("columns box") && !msg.contains("--"), "{msg}");
+        }
         let (code, _) = fit_json(b"1,2,3\n", br#"{"precision":"f16"}"#, &|| 0.0);
         assert_eq!(code, 2);
     }
