@@ -464,7 +464,7 @@ fn decimal(x: f64, digits: u32) -> Option<(bool, u64, i32)> {
 /// Writes `x` with `digits` significant digits, trailing zeros left out:
 /// positional from `1e-4` to below `1e7` (`0.0012`, `25`, `1200000`), else
 /// in exponent form (`1.2e-7`); `0`, `inf`, `-inf`, `NaN` by name.
-fn write_figure(f: &mut fmt::Formatter<'_>, x: f64, digits: u32) -> fmt::Result {
+pub(crate) fn write_figure(f: &mut fmt::Formatter<'_>, x: f64, digits: u32) -> fmt::Result {
     let Some((negative, mut m, e)) = decimal(x, digits) else {
         return f.write_str(if x.is_nan() {
             "NaN"
@@ -571,8 +571,7 @@ mod tests {
 
     /// The figure and the limit an error was decided by, when it has them;
     /// an exhaustive match, so that a new variant does not compile here
-    /// until it says whether it carries a figure (and [`every_error`]
-    /// builds it).
+    /// until it says whether it carries a figure.
     fn figure_and_limit(e: &Error) -> Option<(f32, f32)> {
         match *e {
             Error::TooFewSamples { .. }
@@ -629,6 +628,61 @@ mod tests {
         }
     }
 
+    /// Lists every variant once: an exhaustive match ([`variant_name`])
+    /// and the list of names ([`VARIANTS`]) from the same names, so that a
+    /// new variant does not compile until it is listed here, and
+    /// [`every_error_builds_every_variant`] then fails until
+    /// [`every_error`] builds it.
+    macro_rules! variants {
+        ($($v:ident),* $(,)?) => {
+            fn variant_name(e: &Error) -> &'static str {
+                match e {
+                    $(Error::$v { .. } => stringify!($v),)*
+                }
+            }
+            const VARIANTS: &[&str] = &[$(stringify!($v)),*];
+        };
+    }
+
+    variants!(
+        TooFewSamples,
+        AllSamplesEqual,
+        OutOfRange,
+        NotAnEllipsoid,
+        SingularSystem,
+        NoConvergence,
+        MismatchedLengths,
+        NotEnabled,
+        InvalidNoiseCovariance,
+        Planar,
+        AmbiguousQuadric,
+        ExtremeDistortion,
+        PoorCoverage,
+        FieldStrengthMismatch,
+        NoSphere,
+        FilledCloud,
+        TooManyOutliers,
+        SystematicMisfit,
+        Truncated,
+        BadMagic,
+        UnsupportedVersion,
+        ChecksumMismatch,
+        OffsetsUndetermined,
+        NotPlanar,
+        NoEllipse,
+        ShortArc,
+    );
+
+    #[test]
+    fn every_error_builds_every_variant() {
+        let built: std::collections::BTreeSet<&str> =
+            every_error().iter().map(variant_name).collect();
+        let all: std::collections::BTreeSet<&str> = VARIANTS.iter().copied().collect();
+        assert_eq!(all.len(), VARIANTS.len(), "a name listed twice");
+        let missing: Vec<&&str> = all.difference(&built).collect();
+        assert!(missing.is_empty(), "every_error builds none of {missing:?}");
+    }
+
     /// The figures `x` just beyond `limit` (on the refusing side, `sign`
     /// +1 above, -1 below): the next `f32`, and 1e-6, 1e-4, 1e-2 and 0.5
     /// of the limit away.
@@ -645,7 +699,8 @@ mod tests {
         v
     }
 
-    /// Every variant, each figure just beyond its default limit (and a
+    /// Every variant ([`every_error_builds_every_variant`] checks it), each
+    /// figure just beyond its default limit (and a
     /// limit a caller could set: 0.3, whose `f32` is 0.30000001).
     fn every_error() -> Vec<Error> {
         let th = Thresholds::DEFAULT;

@@ -264,7 +264,7 @@ pub use error::{Error, Figure};
 pub use methods::{Method, OUTLIER_CUT};
 pub use normalize::MIN_SAMPLES;
 use quality::Figures;
-pub use quality::{Quality, Thresholds, Warning, Warnings};
+pub use quality::{Quality, RowCounts, Thresholds, Warning, Warnings};
 pub use real::Real;
 pub use rules::{Drops, Rule, SampleClass, Selection};
 pub use runs::Runs;

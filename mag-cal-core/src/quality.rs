@@ -340,11 +340,10 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     let lit = |x: f32| T::from_single(x);
     let below = |v: Option<T>, limit: f32| v.is_some_and(|v| !(v >= lit(limit)));
     let above = |v: Option<T>, limit: f32| v.is_some_and(|v| !(v <= lit(limit)));
-    let fig = |v: T| Figure::new(v.to_single());
     let mut w = Warnings::NONE;
     if let Some(v) = f.flatness.filter(|_| below(f.flatness, th.refuse_flatness)) {
         return Err(Error::Planar {
-            flatness: fig(v),
+            flatness: beyond(v, th.refuse_flatness, false),
             limit: Figure::new(th.refuse_flatness),
         });
     }
@@ -353,14 +352,14 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         .filter(|_| above(f.fit_error, th.refuse_fit_error))
     {
         return Err(Error::NoSphere {
-            fit_error: fig(e),
+            fit_error: beyond(e, th.refuse_fit_error, true),
             limit: Figure::new(th.refuse_fit_error),
         });
     }
     if f.robust {
         if below(Some(f.skewness), th.refuse_skewness) && above(f.fit_error, th.warn_fit_error) {
             return Err(Error::FilledCloud {
-                skewness: fig(f.skewness),
+                skewness: beyond(f.skewness, th.refuse_skewness, false),
                 limit: Figure::new(th.refuse_skewness),
             });
         }
@@ -375,7 +374,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         }
         if let Some(l) = f.lack_of_fit.filter(|_| f.misfit(th)) {
             return Err(Error::SystematicMisfit {
-                lack_of_fit: fig(l),
+                lack_of_fit: beyond(l, th.refuse_lack_of_fit, true),
                 limit: Figure::new(th.refuse_lack_of_fit),
             });
         }
@@ -385,7 +384,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         .filter(|_| above(f.distortion, th.refuse_distortion))
     {
         return Err(Error::ExtremeDistortion {
-            distortion: fig(d),
+            distortion: beyond(d, th.refuse_distortion, true),
             limit: Figure::new(th.refuse_distortion),
         });
     }
@@ -393,13 +392,13 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         below(f.quadric_gap, th.refuse_quadric_gap) && below(f.radial_rms, th.gap_noise_limit)
     }) {
         return Err(Error::AmbiguousQuadric {
-            quadric_gap: fig(g),
+            quadric_gap: beyond(g, th.refuse_quadric_gap, false),
             limit: Figure::new(th.refuse_quadric_gap),
         });
     }
     if let Some(c) = f.coverage.filter(|_| below(f.coverage, th.refuse_coverage)) {
         return Err(Error::PoorCoverage {
-            coverage: fig(c),
+            coverage: beyond(c, th.refuse_coverage, false),
             limit: Figure::new(th.refuse_coverage),
         });
     }
@@ -408,7 +407,7 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         .filter(|d| !(d.abs() <= lit(th.refuse_field_deviation)))
     {
         return Err(Error::FieldStrengthMismatch {
-            deviation: fig(d),
+            deviation: beyond_magnitude(d, th.refuse_field_deviation),
             limit: Figure::new(th.refuse_field_deviation),
         });
     }
@@ -443,6 +442,29 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         w.insert(Warning::HighFitError);
     }
     Ok(w)
+}
+
+/// `v` as a [`Figure`] beyond `limit` on the side it was judged on
+/// (`above`: greater, else less). Rounding an `f64` figure to `f32` can
+/// land on the limit itself (a flatness within about 1e-9 of 0.03), which
+/// would print "0.03, limit 0.03" and fail a C check `figure < limit`:
+/// such a figure becomes the next `f32` beyond the limit. NaN stays NaN.
+pub(crate) fn beyond<T: Real>(v: T, limit: f32, above: bool) -> Figure {
+    let x = v.to_single();
+    Figure::new(if above && x <= limit {
+        limit.next_up()
+    } else if !above && x >= limit {
+        limit.next_down()
+    } else {
+        x
+    })
+}
+
+/// [`beyond`] for a figure whose magnitude was judged above `limit`
+/// (the field deviation), its sign kept.
+fn beyond_magnitude<T: Real>(v: T, limit: f32) -> Figure {
+    let x = beyond(v.abs(), limit, true).get();
+    Figure::new(if v < T::zero() { -x } else { x })
 }
 
 /// `lambda_min / lambda_max` of the samples' covariance, from the
@@ -1087,41 +1109,85 @@ impl Warning {
     /// # Ok::<(), mag_cal_core::Error>(())
     /// ```
     pub fn explain<T: Real>(self, report: &crate::Report<T>, config: &crate::Config) -> Explained {
-        let th = &config.thresholds;
-        let q = &report.quality;
-        let versus = |name, figure: T, limit: f32| {
-            Detail::Versus(name, Figure::new(figure.to_single()), Figure::new(limit))
+        let rows = RowCounts {
+            used: report.samples_used,
+            non_finite: report
+                .drops
+                .non_finite
+                .saturating_add(report.drops.overflow),
+            glitches: report.drops.glitches(),
+            left_out: report.screened.saturating_add(report.rejected),
+            max_passes: config.max_passes,
         };
-        let detail = match self {
-            Warning::PassCap => Detail::Cap(config.max_passes),
-            Warning::NonFiniteDropped => Detail::Rows(
-                report
-                    .drops
-                    .non_finite
-                    .saturating_add(report.drops.overflow),
-            ),
-            Warning::FewSamples => Detail::Versus(
+        self.explain_with(&report.quality, Some(&rows), &config.thresholds)
+    }
+
+    /// [`Warning::explain`] from the quality figures, the row counts and
+    /// the thresholds alone, for a caller without a [`crate::Report`]
+    /// (the [`crate::background`] calibrator keeps the figures of its
+    /// calibration in use, not the counts). Without `rows`, the warnings
+    /// that count rows print their sentence alone, but
+    /// [`Warning::OutliersRejected`], which names the quality's outlier
+    /// share.
+    pub fn explain_with<T: Real>(
+        self,
+        quality: &Quality<T>,
+        rows: Option<&RowCounts>,
+        thresholds: &Thresholds,
+    ) -> Explained {
+        let th = thresholds;
+        let q = quality;
+        let versus = |name, figure: T, limit: f32, above: bool| {
+            Detail::Versus(name, beyond(figure, limit, above), Figure::new(limit))
+        };
+        let detail = match (self, rows) {
+            (Warning::PassCap, Some(r)) => Detail::Cap(r.max_passes),
+            (Warning::NonFiniteDropped, Some(r)) => Detail::Rows(r.non_finite),
+            (Warning::FewSamples, Some(r)) => Detail::Versus(
                 "rows used",
-                Figure::new(report.samples_used as f32),
+                Figure::new(r.used as f32),
                 Figure::new(th.warn_samples as f32),
             ),
-            Warning::LowSpread => Detail::None,
-            Warning::NearlyPlanar => versus("flatness", q.flatness, th.warn_flatness),
-            Warning::WeakQuadric => versus("quadric gap", q.quadric_gap, th.warn_quadric_gap),
-            Warning::WeakCoverage => {
-                versus("Gram condition", q.gram_condition, th.warn_gram_condition)
+            (Warning::LowSpread, _) => Detail::None,
+            (Warning::NearlyPlanar, _) => versus("flatness", q.flatness, th.warn_flatness, false),
+            (Warning::WeakQuadric, _) => {
+                versus("quadric gap", q.quadric_gap, th.warn_quadric_gap, false)
             }
-            Warning::RowsDropped => Detail::Rows(report.drops.glitches()),
-            Warning::OutliersRejected => {
-                Detail::Rows(report.screened.saturating_add(report.rejected))
+            (Warning::WeakCoverage, _) => versus(
+                "Gram condition",
+                q.gram_condition,
+                th.warn_gram_condition,
+                true,
+            ),
+            (Warning::RowsDropped, Some(r)) => Detail::Rows(r.glitches),
+            (Warning::OutliersRejected, Some(r)) => Detail::Rows(r.left_out),
+            (Warning::OutliersRejected, None) => {
+                Detail::Share(Figure::new(q.outlier_share.to_single()))
             }
-            Warning::HighFitError => versus("fit error", q.fit_error, th.warn_fit_error),
+            (Warning::HighFitError, _) => versus("fit error", q.fit_error, th.warn_fit_error, true),
+            (Warning::PassCap | Warning::NonFiniteDropped | Warning::FewSamples, None)
+            | (Warning::RowsDropped, None) => Detail::None,
         };
         Explained {
             warning: self,
             detail,
         }
     }
+}
+
+/// The row counts a warning's explanation names ([`Warning::explain_with`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowCounts {
+    /// Rows the fit used ([`Warning::FewSamples`]).
+    pub used: usize,
+    /// Rows not finite or too large ([`Warning::NonFiniteDropped`]).
+    pub non_finite: usize,
+    /// Rows dropped by the glitch rules ([`Warning::RowsDropped`]).
+    pub glitches: usize,
+    /// Rows screened out or rejected ([`Warning::OutliersRejected`]).
+    pub left_out: usize,
+    /// The pass cap ([`Warning::PassCap`]).
+    pub max_passes: u32,
 }
 
 /// A warning's sentence with its figure ([`Warning::explain`]).
@@ -1138,6 +1204,8 @@ enum Detail {
     Versus(&'static str, Figure, Figure),
     /// Rows counted.
     Rows(usize),
+    /// A share of the rows (a fraction, printed as a percentage).
+    Share(Figure),
     /// A pass cap.
     Cap(u32),
 }
@@ -1160,6 +1228,11 @@ impl core::fmt::Display for Explained {
             )?,
             Detail::Rows(1) => f.write_str(" (1 row)")?,
             Detail::Rows(n) => write!(f, " ({n} rows)")?,
+            Detail::Share(share) => {
+                f.write_str(" (")?;
+                crate::error::write_figure(f, f64::from(share.get()) * 100.0, 2)?;
+                f.write_str(" % of the rows)")?;
+            }
             Detail::Cap(n) => write!(f, " ({n} passes)")?,
         }
         match advice {
@@ -1202,6 +1275,80 @@ impl Warnings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    extern crate std;
+    use std::string::ToString;
+
+    /// An `f64` figure within 1e-12 of its limit rounds to the limit in
+    /// `f32`: the refusal and the warning carry the next `f32` beyond it,
+    /// and print the two apart.
+    #[test]
+    fn a_figure_next_to_its_limit_stays_beyond_it() {
+        let th = Thresholds::DEFAULT;
+        let near = |limit: f32, above: bool| {
+            let l = f64::from(limit);
+            l + if above { 1e-12 } else { -1e-12 } * l.abs()
+        };
+        for (limit, above) in [(0.03f32, false), (0.2, true), (-0.6, false), (16.0, true)] {
+            let v = near(limit, above);
+            assert_eq!(v as f32, limit, "the case: rounds onto the limit");
+            let x = beyond(v, limit, above).get();
+            assert!(if above { x > limit } else { x < limit }, "{x} {limit}");
+            assert_eq!(x.to_bits().abs_diff(limit.to_bits()), 1, "{x} {limit}");
+        }
+        assert!(beyond(f64::NAN, 0.2, true).get().is_nan());
+        assert_eq!(beyond(0.5f32, 0.2, true).get(), 0.5);
+        let d = beyond_magnitude(-near(0.25, true), 0.25).get();
+        assert_eq!(d, -0.25f32.next_up());
+
+        let mut f = Figures::<f64>::before_fit(1000, crate::Drops::default(), true, true, false);
+        f.flatness = Some(near(th.refuse_flatness, false));
+        let e = judge(&f, &th).unwrap_err();
+        let Error::Planar { flatness, limit } = e else {
+            panic!("{e:?}");
+        };
+        assert!(flatness.get() < limit.get(), "{e:?}");
+        // The printed figure and limit read back apart, on the refusing side.
+        let apart = |m: &str, name: &str, above: bool| {
+            let (_, rest) = m.split_once(&std::format!("({name} ")).expect(m);
+            let (x, rest) = rest.split_once(", limit ").expect(m);
+            let l = rest.split([')', ',']).next().expect(m);
+            let (x, l): (f64, f64) = (x.parse().expect(m), l.parse().expect(m));
+            assert!(if above { x > l } else { x < l }, "{m}");
+        };
+        apart(&e.to_string(), "flatness", false);
+
+        let q = Quality {
+            flatness: near(th.warn_flatness, false),
+            quadric_gap: 1e6,
+            distortion: 1.0,
+            coverage: 0.3,
+            gram_condition: near(th.warn_gram_condition, true),
+            fit_error: 0.01,
+            lack_of_fit: 0.0,
+            outlier_share: 0.0123,
+            skewness: 0.0,
+        };
+        let text = |w: Warning| w.explain_with(&q, None, &th).to_string();
+        let planar = text(Warning::NearlyPlanar);
+        assert!(
+            planar.starts_with("the readings lie close to a plane (flatness "),
+            "{planar}"
+        );
+        assert!(
+            planar.ends_with("): turn the sensor about more axes"),
+            "{planar}"
+        );
+        apart(&planar, "flatness", false);
+        apart(&text(Warning::WeakCoverage), "Gram condition", true);
+        // Without the row counts: the outlier share, or the sentence alone.
+        assert!(
+            text(Warning::OutliersRejected).contains("left out (1.2 % of the rows)"),
+            "{}",
+            text(Warning::OutliersRejected)
+        );
+        assert_eq!(text(Warning::FewSamples), Warning::FewSamples.to_string());
+    }
 
     /// The bisection gap agrees with a full eigen-decomposition's.
     #[test]
