@@ -140,6 +140,10 @@ pub struct Adoption {
     pub lack_of_fit: f64,
     /// The refit's warnings (names).
     pub warnings: Vec<&'static str>,
+    /// The same warnings for people, each with the figure and the limit
+    /// that raised it ([`warning_texts`]).
+    #[serde(skip)]
+    pub warning_texts: Vec<String>,
     /// Buffered samples then.
     pub buffered: usize,
     /// Direction cells holding samples then.
@@ -300,6 +304,7 @@ fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32
             current.warnings,
         );
         quality.fit_error = current.fit_error.to_f64();
+        quality.warning_texts = warning_texts(current);
         let (row, kind) = log
             .adoptions
             .last()
@@ -480,6 +485,7 @@ impl Log {
             coverage: q.coverage.to_f64(),
             lack_of_fit: q.lack_of_fit.to_f64(),
             warnings: current.warnings.iter().map(|w| w.name()).collect(),
+            warning_texts: warning_texts(current),
             buffered: bg.samples().len(),
             cells: bg.cells_filled(),
         });
@@ -686,10 +692,29 @@ fn adoption(a: &Adoption) -> String {
         a.buffered,
         a.cells
     );
-    if !a.warnings.is_empty() {
-        let _ = write!(s, "; warnings {}", a.warnings.join(", "));
+    // A line a warning, as the final calibration's: its name and sentence
+    // with the figure and limit.
+    for (name, text) in a.warnings.iter().zip(&a.warning_texts) {
+        let _ = write!(s, "\n      {name}: {text}");
     }
     s
+}
+
+/// The warnings of `current` for people, each with the figure of its
+/// refit and the limit of the replay's thresholds (the core's
+/// [`Warning::explain_with`](mag_cal_core::Warning::explain_with): the
+/// calibrator keeps no row counts, so `outliers_rejected` names the
+/// outlier share).
+fn warning_texts<T: Real>(current: &mag_cal_core::background::Current<T>) -> Vec<String> {
+    let thresholds = &BackgroundConfig::DEFAULT.thresholds;
+    current
+        .warnings
+        .iter()
+        .map(|w| {
+            w.explain_with(&current.quality, None, thresholds)
+                .to_string()
+        })
+        .collect()
 }
 
 /// ` (3 at rows 10-250: reason; ...)`, or nothing.

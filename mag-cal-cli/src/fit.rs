@@ -120,9 +120,9 @@ pub struct Quality {
 impl Quality {
     /// The figures of the core's `quality` with the calibration's radial RMS
     /// and norm spread (over the rows it used) and its warnings (their
-    /// names; `warning_texts` is left empty, for the caller that has the
-    /// core's report): the `quality` object of `fit`'s JSON, also `magcal
-    /// background`'s.
+    /// names; `warning_texts` is left empty, for the caller to fill with
+    /// [`mag_cal_core::Warning::explain`] or `explain_with`): the `quality`
+    /// object of `fit`'s JSON, also `magcal background`'s.
     pub fn from_core<T: Real>(
         quality: &mag_cal_core::Quality<T>,
         radial_rms: T,

@@ -331,3 +331,50 @@ fn a_recording_that_never_calibrates_gives_the_reason_and_exit_3() {
     let reason = r.json()["reason"].as_str().expect("a reason").to_owned();
     assert!(reason.starts_with("no refit ran in 30 rows: a refit needs 48 buffered samples in 20 of the 48 direction cells"), "{reason}");
 }
+
+/// The warnings of the adoptions and of the final calibration carry the
+/// figure and the limit that raised them (the core's
+/// `Warning::explain_with`): on magcal_25598 the first refit's directions
+/// are weakly covered (its Gram condition beyond 20); on mag3_raw_541 the
+/// final calibration left rows out, its share as the JSON gives it.
+#[test]
+fn warnings_name_their_figures() {
+    let r = magcal(&["background", &real("magcal_25598.txt")]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let line = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("      weak_coverage: "))
+        .unwrap_or_else(|| panic!("{}", r.stdout));
+    let (_, rest) = line.split_once("(Gram condition ").expect(line);
+    let (figure, rest) = rest.split_once(", limit ").expect(line);
+    let limit = rest.split(')').next().expect(line);
+    let (figure, limit): (f64, f64) = (figure.parse().expect(line), limit.parse().expect(line));
+    assert_eq!(limit, mag_cal_core::quality::WARN_GRAM_CONDITION, "{line}");
+    assert!(figure > limit, "{line}");
+
+    let text = magcal(&["background", &real("mag3_raw_541.csv")]);
+    let json = magcal(&["background", &real("mag3_raw_541.csv"), "--format", "json"]).ok_json();
+    let share = json["final"]["quality"]["outlier_share"]
+        .as_f64()
+        .expect("a share");
+    assert!(share > 0.0, "{json}");
+    let warnings = text
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("  warnings      "))
+        .expect(&text.stdout);
+    let (_, rest) = warnings
+        .split_once("outliers_rejected: readings far from the others")
+        .expect(warnings);
+    let (_, rest) = rest.split_once(" were left out (").expect(warnings);
+    let printed: f64 = rest
+        .split(" % of the rows)")
+        .next()
+        .and_then(|s| s.parse().ok())
+        .expect(warnings);
+    assert!(
+        (printed - 100.0 * share).abs() <= 0.01 * printed,
+        "{warnings}: {share}"
+    );
+}

@@ -205,7 +205,8 @@ int main(int argc, char **argv) {
     size_t len = magcal_refusal_message(&r.refusal, why, sizeof why);
     printf("a device lying still: %s\n", why);
     /* The figure and limit that decided it, as numbers too. */
-    printf("  (%s %g, limit %g)\n", r.refusal.name, r.refusal.figure, r.refusal.limit);
+    printf("  (%s %g, limit %g)\n", magcal_refusal_name(&r.refusal), r.refusal.figure,
+           r.refusal.limit);
     if (s == MAGCAL_STATUS_OK || r.refusal.status != s || len >= sizeof why ||
         !(r.refusal.figure > r.refusal.limit))
         failed = 1;

@@ -116,7 +116,7 @@ typedef enum {
   MAGCAL_STATUS_POOR_COVERAGE = 14,
   // The field strength is far from the expected one.
   MAGCAL_STATUS_FIELD_STRENGTH_MISMATCH = 15,
-  // The samples are no sphere (a device lying still, a filled cloud).
+  // The samples are no sphere (a device lying still or barely moved).
   MAGCAL_STATUS_NO_SPHERE = 16,
   // Too many rows had to be left out.
   MAGCAL_STATUS_TOO_MANY_OUTLIERS = 17,
@@ -134,6 +134,9 @@ typedef enum {
   MAGCAL_STATUS_UNDEFINED = 23,
   // An error of the core this API does not name (a newer core).
   MAGCAL_STATUS_OTHER = 24,
+  // The samples fill a volume instead of lying on a shell (a filled
+  // cloud: not one magnetometer's readings of a turning device).
+  MAGCAL_STATUS_FILLED_CLOUD = 25,
 } MagcalStatus;
 
 // What `magcal_collector_offer` did with a reading.
@@ -165,25 +168,25 @@ typedef enum {
 // decided it: the call fills `MagcalResult::refusal` whatever it returns
 // (`status` `MAGCAL_STATUS_OK` and no figure after a calibration).
 // `magcal_refusal_message` writes it as a sentence, the same as the Rust
-// core's.
+// core's; `magcal_refusal_name` names the figure. Plain values: C may
+// build, copy or store one and read it back.
 typedef struct {
-  // The status the call returned.
+  // The status the call returned: it says which figure `figure` is.
   MagcalStatus status;
-  // What `figure` is, NUL-terminated and static, never null: `flatness`,
-  // `quadric gap`, `distortion`, `coverage`, `field deviation`, `fit
-  // error`, `skewness` (a filled cloud, under
-  // `MAGCAL_STATUS_NO_SPHERE`), `outlier share`, `lack of fit`; for
-  // `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out; else "".
-  const char *name;
   // The figure that decided the refusal (`fitted / expected - 1` for the
-  // field deviation, rejected over valid rows for the outlier share), NaN
-  // when the refusal has none.
+  // field deviation, rejected over valid rows for the outlier share),
+  // always beyond `limit` on the refusing side; 0 when the refusal has
+  // none (`magcal_refusal_name` is then ""), infinity for
+  // `MAGCAL_STATUS_NO_SPHERE` when more than half the samples sit at
+  // one point.
   float figure;
-  // The limit it passed (the `MagcalThresholds` value, or the core's),
-  // NaN when none.
+  // The limit it passed (the `MagcalThresholds` value, or the core's);
+  // 0 when none.
   float limit;
   // A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
-  // (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`); else 0.
+  // (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`), the version
+  // found (`UNSUPPORTED_VERSION`), the cargo feature left out
+  // (`NOT_ENABLED`: a number that `magcal_refusal_name` names); else 0.
   uint32_t count;
   // What `count` is compared with: samples required, valid rows; else 0.
   uint32_t of;
@@ -372,6 +375,19 @@ const char *magcal_error_str(int32_t status);
 // Every non-null pointer must point to valid memory of the documented
 // size (writable for outputs) for the duration of the call.
 size_t magcal_refusal_message(const MagcalRefusal *refusal, char *buf, size_t size);
+
+// The name of `refusal`'s figure, NUL-terminated and static, never null:
+// `flatness` (`MAGCAL_STATUS_PLANAR`), `quadric gap`, `distortion`,
+// `coverage`, `field deviation`, `fit error` (`NO_SPHERE`), `skewness`
+// (`FILLED_CLOUD`), `outlier share`, `lack of fit`; for
+// `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out (`adc1`,
+// `adc2-iter`, `submle`, `svd10`, `lg10`); "" for a status without a
+// figure, an unknown status or a null `refusal`.
+//
+// # Safety
+// A non-null `refusal` must point to a readable `MagcalRefusal` for the
+// duration of the call.
+const char *magcal_refusal_name(const MagcalRefusal *refusal);
 
 // Fills `out` with the defaults: ADC2 from LS9 in `float`, outlier
 // handling on, the measured thresholds.

@@ -75,7 +75,7 @@ pub enum MagcalStatus {
     PoorCoverage = 14,
     /// The field strength is far from the expected one.
     FieldStrengthMismatch = 15,
-    /// The samples are no sphere (a device lying still, a filled cloud).
+    /// The samples are no sphere (a device lying still or barely moved).
     NoSphere = 16,
     /// Too many rows had to be left out.
     TooManyOutliers = 17,
@@ -93,11 +93,14 @@ pub enum MagcalStatus {
     Undefined = 23,
     /// An error of the core this API does not name (a newer core).
     Other = 24,
+    /// The samples fill a volume instead of lying on a shell (a filled
+    /// cloud: not one magnetometer's readings of a turning device).
+    FilledCloud = 25,
 }
 
 impl MagcalStatus {
     /// Every status.
-    const ALL: [MagcalStatus; 25] = [
+    const ALL: [MagcalStatus; 26] = [
         Self::Ok,
         Self::NullPointer,
         Self::InvalidArgument,
@@ -123,6 +126,7 @@ impl MagcalStatus {
         Self::ChecksumMismatch,
         Self::Undefined,
         Self::Other,
+        Self::FilledCloud,
     ];
 }
 
@@ -143,7 +147,8 @@ impl From<Error> for MagcalStatus {
             Error::ExtremeDistortion { .. } => Self::ExtremeDistortion,
             Error::PoorCoverage { .. } => Self::PoorCoverage,
             Error::FieldStrengthMismatch { .. } => Self::FieldStrengthMismatch,
-            Error::NoSphere { .. } | Error::FilledCloud { .. } => Self::NoSphere,
+            Error::NoSphere { .. } => Self::NoSphere,
+            Error::FilledCloud { .. } => Self::FilledCloud,
             Error::TooManyOutliers { .. } => Self::TooManyOutliers,
             Error::SystematicMisfit { .. } => Self::SystematicMisfit,
             Error::Truncated => Self::Truncated,
@@ -182,7 +187,7 @@ pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
         MagcalStatus::PoorCoverage => c"too little of the sphere was covered: turn the sensor",
         MagcalStatus::FieldStrengthMismatch => c"the field strength is far from the expected one",
         MagcalStatus::NoSphere => {
-            c"the samples do not lie on a sphere (device not rotated, or a filled cloud)"
+            c"the samples do not lie on a sphere: the device was not rotated"
         }
         MagcalStatus::TooManyOutliers => c"too many samples had to be left out",
         MagcalStatus::SystematicMisfit => c"a region of directions sits off the ellipsoid",
@@ -192,6 +197,9 @@ pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
         MagcalStatus::ChecksumMismatch => c"stored calibration fails its checksum",
         MagcalStatus::Undefined => c"the heading is undefined",
         MagcalStatus::Other => c"calibration failed",
+        MagcalStatus::FilledCloud => {
+            c"the samples fill a volume instead of lying on a sphere: not one magnetometer's readings"
+        }
     };
     s.as_ptr()
 }
@@ -200,44 +208,34 @@ pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
 /// decided it: the call fills `MagcalResult::refusal` whatever it returns
 /// (`status` `MAGCAL_STATUS_OK` and no figure after a calibration).
 /// `magcal_refusal_message` writes it as a sentence, the same as the Rust
-/// core's.
+/// core's; `magcal_refusal_name` names the figure. Plain values: C may
+/// build, copy or store one and read it back.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub struct MagcalRefusal {
-    /// The status the call returned.
+    /// The status the call returned: it says which figure `figure` is.
     pub status: MagcalStatus,
-    /// What `figure` is, NUL-terminated and static, never null: `flatness`,
-    /// `quadric gap`, `distortion`, `coverage`, `field deviation`, `fit
-    /// error`, `skewness` (a filled cloud, under
-    /// `MAGCAL_STATUS_NO_SPHERE`), `outlier share`, `lack of fit`; for
-    /// `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out; else "".
-    pub name: *const c_char,
     /// The figure that decided the refusal (`fitted / expected - 1` for the
-    /// field deviation, rejected over valid rows for the outlier share), NaN
-    /// when the refusal has none.
+    /// field deviation, rejected over valid rows for the outlier share),
+    /// always beyond `limit` on the refusing side; 0 when the refusal has
+    /// none (`magcal_refusal_name` is then ""), infinity for
+    /// `MAGCAL_STATUS_NO_SPHERE` when more than half the samples sit at
+    /// one point.
     pub figure: f32,
-    /// The limit it passed (the `MagcalThresholds` value, or the core's),
-    /// NaN when none.
+    /// The limit it passed (the `MagcalThresholds` value, or the core's);
+    /// 0 when none.
     pub limit: f32,
     /// A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
-    /// (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`); else 0.
+    /// (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`), the version
+    /// found (`UNSUPPORTED_VERSION`), the cargo feature left out
+    /// (`NOT_ENABLED`: a number that `magcal_refusal_name` names); else 0.
     pub count: u32,
     /// What `count` is compared with: samples required, valid rows; else 0.
     pub of: u32,
 }
 
-/// Names of `MagcalRefusal::name`: the figures, then the features.
-const FIGURE_NAMES: [&core::ffi::CStr; 9] = [
-    c"flatness",
-    c"quadric gap",
-    c"distortion",
-    c"coverage",
-    c"field deviation",
-    c"fit error",
-    c"skewness",
-    c"outlier share",
-    c"lack of fit",
-];
+/// The cargo features a `MAGCAL_STATUS_NOT_ENABLED` refusal can name, by
+/// their number in `MagcalRefusal::count`.
 const FEATURES: [(&str, &core::ffi::CStr); 5] = [
     ("adc1", c"adc1"),
     ("adc2-iter", c"adc2-iter"),
@@ -251,21 +249,38 @@ impl MagcalRefusal {
     fn plain(status: MagcalStatus) -> Self {
         Self {
             status,
-            name: c"".as_ptr(),
-            figure: f32::NAN,
-            limit: f32::NAN,
+            figure: 0.0,
+            limit: 0.0,
             count: 0,
             of: 0,
         }
     }
 
-    /// `status` with the figure named `FIGURE_NAMES[name]`.
-    fn versus(status: MagcalStatus, name: usize, figure: f32, limit: f32) -> Self {
+    /// `status` with its figure and limit.
+    fn versus(status: MagcalStatus, figure: Figure, limit: Figure) -> Self {
         Self {
-            name: FIGURE_NAMES.get(name).map_or(c"", |n| n).as_ptr(),
-            figure,
-            limit,
+            figure: figure.get(),
+            limit: limit.get(),
             ..Self::plain(status)
+        }
+    }
+
+    /// The name of the figure, or of the feature left out; "" for none.
+    fn name(&self) -> &'static core::ffi::CStr {
+        match self.status {
+            MagcalStatus::Planar => c"flatness",
+            MagcalStatus::AmbiguousQuadric => c"quadric gap",
+            MagcalStatus::ExtremeDistortion => c"distortion",
+            MagcalStatus::PoorCoverage => c"coverage",
+            MagcalStatus::FieldStrengthMismatch => c"field deviation",
+            MagcalStatus::NoSphere => c"fit error",
+            MagcalStatus::FilledCloud => c"skewness",
+            MagcalStatus::TooManyOutliers => c"outlier share",
+            MagcalStatus::SystematicMisfit => c"lack of fit",
+            MagcalStatus::NotEnabled => FEATURES
+                .get(self.count as usize)
+                .map_or(c"", |(_, name)| name),
+            _ => c"",
         }
     }
 
@@ -287,45 +302,47 @@ impl MagcalRefusal {
                 ..Self::plain(status)
             },
             Error::NotEnabled { feature } => Self {
-                name: FEATURES
+                count: FEATURES
                     .iter()
-                    .find(|(f, _)| *f == feature)
-                    .map_or(c"", |(_, c)| c)
-                    .as_ptr(),
+                    .position(|(f, _)| *f == feature)
+                    .map_or(u32::MAX, to_u32),
                 ..Self::plain(status)
             },
-            Error::Planar { flatness, limit } => {
-                Self::versus(status, 0, flatness.get(), limit.get())
-            }
+            Error::Planar { flatness, limit } => Self::versus(status, flatness, limit),
             Error::AmbiguousQuadric { quadric_gap, limit } => {
-                Self::versus(status, 1, quadric_gap.get(), limit.get())
+                Self::versus(status, quadric_gap, limit)
             }
             Error::ExtremeDistortion { distortion, limit } => {
-                Self::versus(status, 2, distortion.get(), limit.get())
+                Self::versus(status, distortion, limit)
             }
-            Error::PoorCoverage { coverage, limit } => {
-                Self::versus(status, 3, coverage.get(), limit.get())
-            }
+            Error::PoorCoverage { coverage, limit } => Self::versus(status, coverage, limit),
             Error::FieldStrengthMismatch { deviation, limit } => {
-                Self::versus(status, 4, deviation.get(), limit.get())
+                Self::versus(status, deviation, limit)
             }
-            Error::NoSphere { fit_error, limit } => {
-                Self::versus(status, 5, fit_error.get(), limit.get())
-            }
-            Error::FilledCloud { skewness, limit } => {
-                Self::versus(status, 6, skewness.get(), limit.get())
-            }
+            Error::NoSphere { fit_error, limit } => Self::versus(status, fit_error, limit),
+            Error::FilledCloud { skewness, limit } => Self::versus(status, skewness, limit),
             Error::TooManyOutliers {
                 rejected,
                 valid,
                 limit,
-            } => Self {
-                count: to_u32(rejected),
-                of: to_u32(valid),
-                ..Self::versus(status, 7, rejected as f32 / valid as f32, limit.get())
-            },
+            } => {
+                // The share in `f32` can round onto the limit (of 10^8
+                // rows): the next `f32` above it, as the core's figures.
+                let share = rejected as f32 / valid as f32;
+                let limit = limit.get();
+                let share = if share <= limit {
+                    limit.next_up()
+                } else {
+                    share
+                };
+                Self {
+                    count: to_u32(rejected),
+                    of: to_u32(valid),
+                    ..Self::versus(status, Figure::new(share), Figure::new(limit))
+                }
+            }
             Error::SystematicMisfit { lack_of_fit, limit } => {
-                Self::versus(status, 8, lack_of_fit.get(), limit.get())
+                Self::versus(status, lack_of_fit, limit)
             }
             _ => Self::plain(status),
         }
@@ -333,10 +350,8 @@ impl MagcalRefusal {
 
     /// The core's error back, for its message; `None` for a status that
     /// is no error of the core (its sentence is `magcal_error_str`'s).
-    /// `name` is compared, never read.
     fn to_core(self) -> Option<Error> {
         let (figure, limit) = (Figure::new(self.figure), Figure::new(self.limit));
-        let named = |i: usize| FIGURE_NAMES.get(i).is_some_and(|n| n.as_ptr() == self.name);
         Some(match self.status {
             MagcalStatus::TooFewSamples => Error::TooFewSamples {
                 found: self.count as usize,
@@ -350,10 +365,7 @@ impl MagcalRefusal {
                 iterations: self.count,
             },
             MagcalStatus::NotEnabled => Error::NotEnabled {
-                feature: FEATURES
-                    .iter()
-                    .find(|(_, c)| c.as_ptr() == self.name)
-                    .map_or("", |(f, _)| f),
+                feature: FEATURES.get(self.count as usize).map_or("", |(f, _)| f),
             },
             MagcalStatus::InvalidNoiseCovariance => Error::InvalidNoiseCovariance,
             MagcalStatus::Planar => Error::Planar {
@@ -376,7 +388,7 @@ impl MagcalRefusal {
                 deviation: figure,
                 limit,
             },
-            MagcalStatus::NoSphere if named(6) => Error::FilledCloud {
+            MagcalStatus::FilledCloud => Error::FilledCloud {
                 skewness: figure,
                 limit,
             },
@@ -514,10 +526,9 @@ unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<Mag
     }
     // SAFETY: as documented; the enum is read as its `int`, and every
     // other field is valid for any bits.
-    let (raw, name, figure, limit, count, of) = unsafe {
+    let (raw, figure, limit, count, of) = unsafe {
         (
             core::ptr::addr_of!((*refusal).status).cast::<i32>().read(),
-            core::ptr::addr_of!((*refusal).name).read(),
             core::ptr::addr_of!((*refusal).figure).read(),
             core::ptr::addr_of!((*refusal).limit).read(),
             core::ptr::addr_of!((*refusal).count).read(),
@@ -529,13 +540,33 @@ unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<Mag
         .find(|s| *s as i32 == raw)
         .map(|status| MagcalRefusal {
             status,
-            name,
             figure,
             limit,
             count,
             of,
         });
     Some((raw, refusal))
+}
+
+/// The name of `refusal`'s figure, NUL-terminated and static, never null:
+/// `flatness` (`MAGCAL_STATUS_PLANAR`), `quadric gap`, `distortion`,
+/// `coverage`, `field deviation`, `fit error` (`NO_SPHERE`), `skewness`
+/// (`FILLED_CLOUD`), `outlier share`, `lack of fit`; for
+/// `MAGCAL_STATUS_NOT_ENABLED` the cargo feature left out (`adc1`,
+/// `adc2-iter`, `submle`, `svd10`, `lg10`); "" for a status without a
+/// figure, an unknown status or a null `refusal`.
+///
+/// # Safety
+/// A non-null `refusal` must point to a readable `MagcalRefusal` for the
+/// duration of the call.
+#[no_mangle]
+pub unsafe extern "C" fn magcal_refusal_name(refusal: *const MagcalRefusal) -> *const c_char {
+    // SAFETY: null-checked and aligned by `read_refusal`, readable by the
+    // caller's word.
+    match unsafe { read_refusal(refusal) } {
+        Some((_, Some(r))) => r.name().as_ptr(),
+        _ => c"".as_ptr(),
+    }
 }
 
 /// `MagcalConfig::method`: the LS ellipsoid fit alone.
@@ -758,7 +789,7 @@ impl<T: Real> From<&Calibration<T>> for MagcalCalibration {
 
 /// A calibration and how it was obtained.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub struct MagcalResult {
     /// The calibration.
     pub calibration: MagcalCalibration,
@@ -1576,8 +1607,8 @@ mod tests {
         let r = out.refusal;
         assert_eq!(r.status, status);
         assert_eq!((r.figure, r.limit), (flatness.get(), limit.get()));
-        // SAFETY: a static NUL-terminated name.
-        let name = unsafe { CStr::from_ptr(r.name) };
+        // SAFETY: a valid refusal; the name is static and NUL-terminated.
+        let name = unsafe { CStr::from_ptr(magcal_refusal_name(&r)) };
         assert_eq!(name.to_str(), Ok("flatness"));
         let (text, n) = message(&r, 512);
         assert_eq!(text, rust.to_string());
@@ -1654,6 +1685,20 @@ mod tests {
             assert_eq!(r.status, MagcalStatus::from(e), "{e:?}");
             assert_ne!(r.status, MagcalStatus::Other, "{e:?}");
             assert_eq!(message(&r, 512).0, e.to_string(), "{e:?}");
+            // A copy through its bytes, as C stores one: the same message.
+            // SAFETY: `MagcalRefusal` is plain data, valid for these bytes.
+            let stored = unsafe {
+                let bytes: [u8; size_of::<MagcalRefusal>()] = core::mem::transmute(r);
+                core::mem::transmute::<_, MagcalRefusal>(bytes)
+            };
+            assert_eq!(message(&stored, 512).0, e.to_string(), "{e:?}");
+            // SAFETY: a valid refusal; the name is static.
+            let name = unsafe { CStr::from_ptr(magcal_refusal_name(&r)) };
+            let name = name.to_str().unwrap();
+            match e {
+                Error::NotEnabled { feature } => assert_eq!(name, feature),
+                _ => assert_eq!(name.is_empty(), r.limit == 0.0, "{e:?}"),
+            }
         }
         // Statuses of the C API alone: `magcal_error_str`'s sentence.
         let bad = MagcalRefusal::plain(MagcalStatus::InvalidArgument);
@@ -1661,6 +1706,52 @@ mod tests {
         // SAFETY: null is allowed.
         let n = unsafe { magcal_refusal_message(core::ptr::null(), core::ptr::null_mut(), 0) };
         assert_eq!(n, "a pointer argument is null".len());
+    }
+
+    /// A refusal C builds itself (a filled cloud, as a program might keep
+    /// one in a log) reads as the core's: the status alone says which
+    /// figure it is. Plain data: `Send`, `Sync`, no pointer.
+    #[test]
+    fn a_refusal_built_in_c_reaches_every_kind() {
+        fn plain_data<T: Send + Sync + Copy>() {}
+        plain_data::<MagcalRefusal>();
+        plain_data::<MagcalResult>();
+        let c_built = MagcalRefusal {
+            status: MagcalStatus::FilledCloud,
+            figure: -0.75,
+            limit: -0.6,
+            count: 0,
+            of: 0,
+        };
+        let rust = Error::FilledCloud {
+            skewness: Figure::new(-0.75),
+            limit: Figure::new(-0.6),
+        };
+        assert_eq!(MagcalStatus::from(rust), MagcalStatus::FilledCloud);
+        assert_eq!(message(&c_built, 512).0, rust.to_string());
+        // SAFETY: a valid refusal; null gives "".
+        unsafe {
+            assert_eq!(CStr::from_ptr(magcal_refusal_name(&c_built)), c"skewness");
+            assert_eq!(CStr::from_ptr(magcal_refusal_name(core::ptr::null())), c"");
+        }
+        let feature = MagcalRefusal {
+            status: MagcalStatus::NotEnabled,
+            count: 2,
+            ..MagcalRefusal::plain(MagcalStatus::NotEnabled)
+        };
+        assert_eq!(
+            message(&feature, 512).0,
+            Error::NotEnabled { feature: "submle" }.to_string()
+        );
+        // The outlier share of 10^8 rows, which rounds onto the limit in
+        // `f32`: the next `f32` above it.
+        let r = MagcalRefusal::from_core(Error::TooManyOutliers {
+            rejected: 25_000_001,
+            valid: 100_000_000,
+            limit: Figure::new(0.25),
+        });
+        assert_eq!(25_000_001f32 / 100_000_000f32, 0.25, "the case");
+        assert!(r.figure > r.limit, "{r:?}");
     }
 
     /// Small buffers: cut, NUL-terminated, the whole length returned; a

@@ -590,6 +590,7 @@ fn ffi() {
             maybe_null(addr_of!(MESSAGE).cast::<core::ffi::c_char>()).cast_mut(),
             count.min(256),
         ));
+        keep(magcal_refusal_name(maybe_null(addr_of!((*result).refusal))));
     }
 }
 
