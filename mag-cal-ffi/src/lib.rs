@@ -1686,10 +1686,12 @@ mod tests {
             assert_ne!(r.status, MagcalStatus::Other, "{e:?}");
             assert_eq!(message(&r, 512).0, e.to_string(), "{e:?}");
             // A copy through its bytes, as C stores one: the same message.
-            // SAFETY: `MagcalRefusal` is plain data, valid for these bytes.
+            // SAFETY: `MagcalRefusal` is plain data without padding (20
+            // bytes), valid for the bytes of a valid one.
             let stored = unsafe {
-                let bytes: [u8; size_of::<MagcalRefusal>()] = core::mem::transmute(r);
-                core::mem::transmute::<_, MagcalRefusal>(bytes)
+                type Bytes = [u8; size_of::<MagcalRefusal>()];
+                let bytes = core::mem::transmute::<MagcalRefusal, Bytes>(r);
+                core::mem::transmute::<Bytes, MagcalRefusal>(bytes)
             };
             assert_eq!(message(&stored, 512).0, e.to_string(), "{e:?}");
             // SAFETY: a valid refusal; the name is static.
