@@ -27,15 +27,20 @@
 //!   are skipped and counted, a line with some of them (cut short) is a
 //!   non-finite row; no magnetometer reading among several, or several, is
 //!   an error (exit 2) that lists the readings found and how to pick one;
-//! - otherwise a table. Its first data line is the first of the first
-//!   [`SNIFF_LINES`] lines with at least three numeric fields, its
-//!   separator chosen from that line: `;` if it holds one, else `,`, else
-//!   runs of spaces and tabs. Fields are trimmed and may be wrapped in
-//!   double quotes. The header is the last line before it with at least
-//!   three fields, one of them not a number; lines before the header (or
-//!   before the data, without one) are metadata (`Fs,50.00`), skipped and
-//!   counted. Without such a data line, the first line is the header when
-//!   any of its fields is not a number;
+//! - otherwise a table. Its first data line is found among the first
+//!   [`SNIFF_LINES`] lines with at least three numeric fields, each split
+//!   at its own separator: `;` if it holds one, else `,`, else runs of
+//!   spaces and tabs. Fields are trimmed and may be wrapped in double
+//!   quotes. It is the first such line that begins a run of [`DATA_RUN`]
+//!   lines of its shape (as many fields, as many of them numbers), or of
+//!   as many as the file has (else the first that begins the longest
+//!   run), or an earlier line of that shape; so a metadata line of three
+//!   numbers (`Start,2024,05,12`) is not data. The header is the last line
+//!   before it with at least three fields, one of them not a number, and
+//!   fewer than three numbers; lines before the header (or before the
+//!   data, without one) are metadata (`Fs,50.00`), skipped and counted.
+//!   Without such a data line, the first line is the header when any of
+//!   its fields is not a number;
 //! - `--columns` gives x, y, z by header name (case-insensitive) or by
 //!   1-based field number (`--columns 7,8,9`, with or without a header), and
 //!   only those fields have to be numbers;
@@ -461,14 +466,72 @@ pub fn parse_with_accel(
 /// the 13th), and loggers a few lines of metadata (`Fs,50.00`).
 pub const SNIFF_LINES: usize = 40;
 
-/// The number of numeric fields of `line`, split at its own separator.
-fn numeric_fields(line: &str) -> usize {
-    let separator = Separator::detect(line);
-    separator
-        .fields(line)
+/// The 1-based numbers of the fields that are numbers.
+fn numeric_fields(fields: &[&str]) -> Vec<usize> {
+    fields
         .iter()
-        .filter(|f| number(f).is_some())
-        .count()
+        .enumerate()
+        .filter(|(_, f)| number(f).is_some())
+        .map(|(i, _)| i + 1)
+        .collect()
+}
+
+/// How many content lines of one shape (as many fields, as many of them
+/// numbers) begin a table's data, or as many as the file has: a
+/// metadata line of three numbers (`Start,2024,05,12`) is followed by
+/// lines of other shapes (`Fs,50`, the header), so it is not taken for
+/// the first data row (which made the first three fields, a tumbling
+/// accelerometer, the samples, with exit 0:
+/// `cargo test -p mag-cal-cli --test formats a_date_line`). Three, not
+/// two, so that two metadata lines of one shape (`Start,2024,05,12`,
+/// `End,2024,05,13`) are not a run either (with two, the unit test
+/// `a_metadata_line_of_three_numbers_is_not_data` fails).
+const DATA_RUN: usize = 3;
+
+/// A line's shape under `separator`: its number of fields and of numeric
+/// fields.
+fn shape(separator: Separator, line: &str) -> (usize, usize) {
+    let fields = separator.fields(line);
+    (fields.len(), numeric_fields(&fields).len())
+}
+
+/// Where a table's data begin, and their separator (see the module docs):
+/// of the first [`SNIFF_LINES`] lines with at least three numeric fields,
+/// the first that begins a run of [`DATA_RUN`] lines of its shape, or of
+/// as many as the file has, else the first that begins the longest run;
+/// then the first line of that shape before it (data rows garbled near the
+/// start do not push the data past rows of the right shape). `None`
+/// without a line of three numbers.
+fn data_start(lines: &[(usize, &str)]) -> Option<(usize, Separator)> {
+    // (whole run, run length) and the line that begins it.
+    let mut best: Option<((bool, usize), usize)> = None;
+    for (at, &(_, line)) in lines.iter().enumerate().take(SNIFF_LINES) {
+        let separator = Separator::detect(line);
+        let want = shape(separator, line);
+        if want.1 < 3 {
+            continue;
+        }
+        let run = lines[at..]
+            .iter()
+            .take(DATA_RUN)
+            .take_while(|&&(_, line)| shape(separator, line) == want)
+            .count();
+        let rank = (run == DATA_RUN || at + run == lines.len(), run);
+        if best.is_none_or(|(best, ..)| rank > best) {
+            best = Some((rank, at));
+        }
+        if run == DATA_RUN {
+            break;
+        }
+    }
+    let (_, at) = best?;
+    let separator = Separator::detect(lines[at].1);
+    let want = shape(separator, lines[at].1);
+    let first = lines[..at]
+        .iter()
+        .position(|&(_, line)| shape(separator, line) == want)
+        .unwrap_or(at);
+    Some((first, separator))
 }
 
 /// Reads a table: delimited fields, an optional header (after optional
@@ -479,21 +542,19 @@ fn delimited(
     accel: Accel<'_>,
     source_name: &str,
 ) -> Result<Table, CliError> {
-    // The first data line has at least three numeric fields; the header is
-    // the last line before it with at least three fields, one of them not
-    // a number; lines before the header (or before the data, without one)
-    // are metadata. Without such a data line among the first, the first
-    // line is the header when one of its fields is not a number.
-    let data_at = lines
-        .iter()
-        .take(SNIFF_LINES)
-        .position(|(_, line)| numeric_fields(line) >= 3);
+    // The first data line ([`data_start`]); the header is the last line
+    // before it with at least three fields, one of them not a number, and
+    // fewer than three numbers; lines before the header (or before the
+    // data, without one) are metadata. Without such a data line among the
+    // first, the first line is the header when one of its fields is not a
+    // number.
+    let data_at = data_start(lines);
     let (separator, header_at, start) = match data_at {
-        Some(data_at) => {
-            let separator = Separator::detect(lines[data_at].1);
+        Some((data_at, separator)) => {
             let header_at = lines[..data_at].iter().rposition(|(_, line)| {
                 let fields = separator.fields(line);
-                fields.len() >= 3 && fields.iter().any(|f| number(f).is_none())
+                let numeric = numeric_fields(&fields).len();
+                fields.len() >= 3 && numeric < fields.len() && numeric < 3
             });
             (separator, header_at, header_at.map_or(data_at, |h| h + 1))
         }
@@ -508,19 +569,13 @@ fn delimited(
     };
     let header_fields = header_at.map(|h| separator.fields(lines[h].1));
     let header = header_fields.as_deref();
-    let first_row = lines.get(data_at.unwrap_or(start));
+    let first_row = lines.get(data_at.map_or(start, |(at, _)| at));
     let first_no = first_row.map_or(lines[0].0, |&(no, _)| no);
 
     let (indices, picked) = match columns {
         None => {
-            let numeric = first_row.map_or(0, |&(_, line)| {
-                separator
-                    .fields(line)
-                    .iter()
-                    .filter(|f| number(f).is_some())
-                    .count()
-            });
-            default_indices(header, numeric, source_name)?
+            let fields = first_row.map_or_else(Vec::new, |&(_, line)| separator.fields(line));
+            default_indices(header, &fields, source_name)?
         }
         Some(columns) => column_indices(header, columns, "--columns", first_no, source_name)?,
     };
@@ -626,7 +681,7 @@ fn column_indices(
     for (index, name) in indices.iter_mut().zip(names) {
         *index = match field_number(name) {
             Some(n) => n - 1,
-            None => named_indices(header, &[name.as_str(); 3], source_name)?[0],
+            None => named_index(header, name, source_name)?,
         };
     }
     Ok((indices, Picked::Named))
@@ -694,15 +749,18 @@ fn motioncal(text: &str, with_accel: bool) -> Table {
     }
 }
 
-/// The sample columns without `--columns`, when the first data row has
-/// `numeric` numeric fields: the first three fields when there are at most
-/// three, else the one raw magnetometer triple the header names (see the
-/// module docs); none, several, or no header is an error.
+/// The sample columns without `--columns`, from the header and the first
+/// data row's fields: the first three fields when at most three are
+/// numbers, else the one raw magnetometer triple the header names (see the
+/// module docs); none, several, or no header is an error (without a
+/// header, it suggests the last three numeric fields).
 fn default_indices(
     header: Option<&[&str]>,
-    numeric: usize,
+    first_row: &[&str],
     source_name: &str,
 ) -> Result<([usize; 3], Picked), CliError> {
+    let numeric_at = numeric_fields(first_row);
+    let numeric = numeric_at.len();
     if numeric <= 3 {
         return Ok(([0, 1, 2], Picked::FirstThree));
     }
@@ -711,9 +769,10 @@ fn default_indices(
             "{source_name}: {numeric} numeric columns and no header line to choose \
              the magnetometer's x, y, z from; add a header naming the columns and \
              pass --columns X,Y,Z, or pass their field numbers (from 1), e.g. \
-             --columns {},{},{numeric}",
-            numeric - 2,
-            numeric - 1,
+             --columns {},{},{}",
+            numeric_at[numeric - 3],
+            numeric_at[numeric - 2],
+            numeric_at[numeric - 1],
         )));
     };
     let triples = mag_triples(header);
@@ -866,27 +925,31 @@ fn column_list(header: &[&str], indices: &[usize]) -> String {
     names.join(", ")
 }
 
+/// The position of `name` in `header` (case-insensitive).
+fn named_index(header: &[&str], name: &str, source_name: &str) -> Result<usize, CliError> {
+    header
+        .iter()
+        .position(|f| f.eq_ignore_ascii_case(name))
+        .ok_or_else(|| {
+            CliError::Input(format!(
+                "{source_name}: no column named '{}' in the header (columns: {})",
+                excerpt(name),
+                column_list(header, &all(header))
+            ))
+        })
+}
+
 /// The positions of `names` in `header` (case-insensitive).
-fn named_indices<S: AsRef<str>>(
+fn named_indices(
     header: &[&str],
-    names: &[S; 3],
+    [x, y, z]: &[&str; 3],
     source_name: &str,
 ) -> Result<[usize; 3], CliError> {
-    let mut indices = [0; 3];
-    for (index, name) in indices.iter_mut().zip(names) {
-        let name = name.as_ref();
-        *index = header
-            .iter()
-            .position(|f| f.eq_ignore_ascii_case(name))
-            .ok_or_else(|| {
-                CliError::Input(format!(
-                    "{source_name}: no column named '{}' in the header (columns: {})",
-                    excerpt(name),
-                    column_list(header, &all(header))
-                ))
-            })?;
-    }
-    Ok(indices)
+    Ok([
+        named_index(header, x, source_name)?,
+        named_index(header, y, source_name)?,
+        named_index(header, z, source_name)?,
+    ])
 }
 
 /// One data row: the fields at `indices`, as numbers.
@@ -1010,6 +1073,65 @@ mod tests {
         // Copies of the header later are still copies.
         let t = parse(b"Fs,50\nmx,my,mz\n1,2,3\nmx,my,mz\n4,5,6\n", None, "t").expect("parses");
         assert_eq!((t.samples.len(), t.skipped.header_copies), (2, 1));
+    }
+
+    #[test]
+    fn a_metadata_line_of_three_numbers_is_not_data() {
+        // A start date before the header of wide rows: the data begin with
+        // the first run of lines of one shape.
+        let text = b"Start,2024,05,12\nFs,50\nax,ay,az,gx,gy,gz,mx,my,mz\n\
+                     1,2,3,0,0,0,7,8,9\n4,5,6,0,0,0,10,11,12\n4,5,6,0,0,0,13,14,15\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples[0], [7.0, 8.0, 9.0]);
+        assert_eq!(t.columns.to_string(), "mx,my,mz (from the header)");
+        assert_eq!(t.skipped.no_reading, 2);
+        // Two such lines of one shape.
+        let text = b"Start,2024,05,12\nEnd,2024,05,13\nmx,my,mz,t\n\
+                     7,8,9,0\n10,11,12,1\n13,14,15,2\n";
+        let t = parse(text, None, "t").expect("parses");
+        assert_eq!(t.samples[0], [7.0, 8.0, 9.0]);
+        assert_eq!(t.skipped.no_reading, 2);
+        // Fewer rows than a run, or a line cut short among them: the
+        // longest run.
+        let head = "Start,2024,05,12\nFs,50\nax,ay,az,gx,gy,gz,mx,my,mz\n";
+        for rows in [
+            "1,2,3,0,0,0,7,8,9\n",
+            "1,2,3,0,0,0,7,8,9\n4,5,6,0,0,0,10,11,12\n4,5",
+        ] {
+            let t = parse(format!("{head}{rows}").as_bytes(), None, "t").expect(rows);
+            assert_eq!(t.samples[0], [7.0, 8.0, 9.0], "{rows}");
+            assert_eq!(t.skipped.no_reading, 2, "{rows}");
+        }
+        // Without a header: metadata, and wide rows refused as such.
+        let err = parse(b"Start,2024,05,12\n1,2,3,4\n5,6,7,8\n9,1,2,3\n", None, "f").unwrap_err();
+        assert!(err.to_string().contains("no header line"), "{err}");
+        let t = parse(b"Start,2024,05,12\n1,2,3\n5,6,7\n9,1,2\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.no_reading), (3, 1));
+        // Rows garbled near the start: the data still begin with the first
+        // row, not after a garbled line taken for a header.
+        let t = parse(b"1,2,3\n1,abc,3\n4,5,6\n7,8,9\n1,2,3\n", None, "t").expect("parses");
+        assert_eq!((t.samples.len(), t.skipped.unreadable), (5, 1));
+        assert_eq!(t.columns.names, None);
+        let t = parse(b"x,y,z\n4,5\n1,2,3\n4,5,6\n7,8,9\n", None, "t").expect("parses");
+        assert_eq!(t.columns.names, Some(["x", "y", "z"].map(String::from)));
+        assert_eq!((t.samples.len(), t.skipped.unreadable), (4, 1));
+    }
+
+    #[test]
+    fn the_advice_names_the_last_three_numeric_fields() {
+        // A text time stamp first, a status last: fields 5, 6, 7 of 8.
+        let err = parse(
+            b"12:00:01,0.1,0.2,9.8,19,-129,174,OK\n12:00:02,0.1,0.2,9.8,20,-130,175,OK\n",
+            None,
+            "f",
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("f: 6 numeric columns and no header line")
+                && err.to_string().ends_with("e.g. --columns 5,6,7"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -335,6 +335,38 @@ fn metadata_before_the_header() {
     );
 }
 
+/// A metadata line of three numbers (a start date) before the metadata and
+/// the header of 9-field rows: the data begin where lines of one shape
+/// begin, so the date is metadata, the header names the magnetometer last,
+/// and the fit is the plain file's. Taken as the first data row, the date
+/// made the first three fields (a tumbling accelerometer, which lies on a
+/// sphere too) the samples, with exit 0.
+#[test]
+fn a_date_line_before_the_header_is_metadata() {
+    let (path, rows) = icm();
+    let reference = magcal(&["fit", &path, "--format", "json"]).json();
+    let mut text = String::from("Start,2024,05,12\nFs,50\nax,ay,az,gx,gy,gz,mx,my,mz\n");
+    for [x, y, z] in &rows {
+        // The accelerometer of a tumbling device: g along each row's
+        // direction, a sphere of radius 9.81 about the origin.
+        let n = (x * x + y * y + z * z).sqrt();
+        let g = [x, y, z].map(|v| 9.81 * v / n);
+        text.push_str(&format!(
+            "{:.4},{:.4},{:.4},0.01,-0.02,0.00,{x},{y},{z}\n",
+            g[0], g[1], g[2]
+        ));
+    }
+    let file = temp_file("date_line.csv", &text);
+    let run = magcal(&["fit", &file, "--format", "json"]);
+    assert_same_fit(&run.json(), &reference, "date line");
+    assert_eq!(
+        run.stderr,
+        "magcal: note: columns mx,my,mz (from the header)\n\
+         magcal: note: input: 2 lines without a magnetometer reading skipped: line 1: \
+         'Start,2024,05,12'; line 2: 'Fs,50'\n"
+    );
+}
+
 /// Rows of 9 and 18 numeric fields without a header: refused without
 /// `--columns`, read by field number with it, in `fit`, `apply`, `offsets`
 /// and `planar` alike.
