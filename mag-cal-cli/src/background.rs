@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::cli::{BackgroundArgs, Format, Precision};
 use crate::error::CliError;
 use crate::fit::{counts, spread, Parameters, Quality};
-use crate::input::{self, Picked, Source};
+use crate::input::{self, Source};
 use crate::output::{self, sig};
 
 /// Samples a direction cell holds: 48 cells of 6 (288 samples), as the
@@ -81,6 +81,9 @@ pub struct Replay {
     pub final_calibration: Option<Final>,
     /// Why there is no calibration (`null` when there is one).
     pub reason: Option<String>,
+    /// The calibrator's configuration (not in the JSON report).
+    #[serde(skip)]
+    pub config: BackgroundConfig,
 }
 
 /// What [`Background::push`] did with the rows.
@@ -176,7 +179,7 @@ pub struct OffsetsOnly {
 /// Refusals of one kind.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Refusal {
-    /// The core's reason, with the figures of the first such refusal.
+    /// The core's reason, with the figures of the last such refusal.
     pub reason: String,
     /// How many.
     pub count: usize,
@@ -241,7 +244,7 @@ pub fn run(args: &BackgroundArgs, out: &mut dyn Write) -> Result<Vec<String>, Cl
         return Err(CliError::NotCalibrated(reason.clone()));
     }
     let json = args.format == Format::Json;
-    Ok((json && table.columns.picked == Picked::Header)
+    Ok((json && table.columns.detected())
         .then(|| format!("columns {}", table.columns))
         .into_iter()
         .chain(skipped.filter(|_| json).map(|s| format!("input: {s}")))
@@ -263,8 +266,9 @@ pub fn replay(samples: &[[f64; 3]], precision: Precision, steps: u32) -> Replay 
 
 /// The replay in precision `T` on samples `S`.
 fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32) -> Replay {
+    let config = BackgroundConfig::DEFAULT;
     // About 10 KB for f64 samples: on the heap.
-    let mut bg: Box<Calibrator<T, S>> = Box::new(Background::new(BackgroundConfig::DEFAULT));
+    let mut bg: Box<Calibrator<T, S>> = Box::new(Background::new(config));
     let mut log = Log::default();
     for (row, sample) in samples.iter().enumerate() {
         let pushed = bg.push(*sample);
@@ -319,6 +323,7 @@ fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32
     });
     let reason = final_calibration.is_none().then(|| {
         not_calibrated(
+            &config,
             &log.refits.refused,
             &log.readings,
             bg.samples().len(),
@@ -354,6 +359,7 @@ fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32
         },
         final_calibration,
         reason,
+        config,
     }
 }
 
@@ -361,12 +367,12 @@ fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32
 /// first refit still lacked; and the wild readings, which were not
 /// buffered.
 fn not_calibrated(
+    config: &BackgroundConfig,
     refused: &[Refusal],
     readings: &Readings,
     buffered: usize,
     cells: usize,
 ) -> String {
-    let config = BackgroundConfig::DEFAULT;
     let rows = readings.stored + readings.too_close + readings.invalid + readings.wild;
     let mut reason = match refused.iter().max_by_key(|r| r.last_row) {
         Some(last) => {
@@ -600,7 +606,7 @@ pub fn text(r: &Replay, source_name: &str, columns: &str, skipped: Option<&str>)
             s,
             "  stale         from rows {} (residuals risen for {} readings); {} buffered samples purged after a new hard iron",
             rows.join(", "),
-            BackgroundConfig::DEFAULT.stale_readings,
+            r.config.stale_readings,
             r.purged
         );
     }
@@ -827,7 +833,7 @@ mod tests {
             (2, 10, 30)
         );
         let readings = Readings::default();
-        let reason = not_calibrated(&refused, &readings, 0, 0);
+        let reason = not_calibrated(&BackgroundConfig::DEFAULT, &refused, &readings, 0, 0);
         assert!(
             reason.starts_with("3 refits refused, the last at row 30: samples lie near a plane")
                 && reason.contains("flatness 0.01,"),

@@ -125,9 +125,13 @@ fn agrees_with_fit(name: &str) -> (f64, f64) {
 
 #[test]
 fn the_final_calibration_agrees_with_fit_on_icm20948() {
-    // Measured: 0.0185 and 0.0057 (the calibration adopted at row 121 from
-    // 113 buffered samples stays: later refits fit the buffer no better
-    // than 0.9 of its fit error).
+    // Measured |db| 0.0185, |drho| 0.0057 of the field (`magcal background`
+    // and `magcal fit` of the file, --format json): a thin margin under
+    // AGREE. The first calibration, at row 121 from 113 samples in 41
+    // cells (fit error 0.0235), is never replaced: a refit is adopted only
+    // if its fit error is below 0.9 of the current one, and the file's
+    // noise floor is about that error (the batch fit's is 0.0238), so the
+    // 3 later refits are kept, not adopted.
     agrees_with_fit("icm20948_mag_300.csv");
 }
 
@@ -376,5 +380,44 @@ fn warnings_name_their_figures() {
     assert!(
         (printed - 100.0 * share).abs() <= 0.01 * printed,
         "{warnings}: {share}"
+    );
+}
+
+#[test]
+fn labelled_lines_are_named_and_calibrate_as_the_plain_file() {
+    let path = real("icm20948_mag_300.csv");
+    let text = std::fs::read_to_string(&path).expect("readable");
+    let lines: String = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l
+                .split(',')
+                .map(|f| f.trim().parse().expect("number"))
+                .collect();
+            format!("Mag X: {} Y: {} Z: {} uT\n", v[0], v[1], v[2])
+        })
+        .collect();
+    let file = temp_file("background_labelled.txt", &lines);
+    let columns = "Mag X (uT),Mag Y (uT),Mag Z (uT) (labelled values)";
+    let plain = magcal(&["background", &path, "--format", "json"]).ok_json();
+    let run = magcal(&["background", &file, "--format", "json"]);
+    let labelled = run.ok_json();
+    // The JSON report names on stderr the values it took.
+    assert_eq!(
+        run.stderr,
+        format!("magcal: note: columns {columns}\n"),
+        "one note"
+    );
+    assert_eq!(labelled["final"], plain["final"]);
+    assert_eq!(labelled["adoptions"], plain["adoptions"]);
+    // The text report names them on its columns line.
+    let t = magcal(&["background", &file]);
+    assert_eq!(t.code, 0, "{}", t.stderr);
+    assert!(t.stderr.is_empty(), "{}", t.stderr);
+    assert!(
+        t.stdout.contains(&format!("\n  columns       {columns}\n")),
+        "{}",
+        t.stdout
     );
 }
