@@ -1123,7 +1123,10 @@ mod tests {
             assert_eq!(code, 2, "{page}");
             assert!(page.contains(expected), "{page}\n  expected {expected}");
             assert!(page.contains("columns box"), "{page}");
-            assert!(!page.contains("--") && !page.contains("add a header"), "{page}");
+            assert!(
+                !page.contains("--") && !page.contains("add a header"),
+                "{page}"
+            );
             // The reason before the advice is the CLI's (where it does
             // not name the option itself).
             let cli = cli.to_string();
@@ -1171,7 +1174,11 @@ mod tests {
             let options = json!({ "columns": columns }).to_string();
             let (code, doc) = fit_json(text.as_bytes(), options.as_bytes(), &|| 0.0);
             let doc: Value = serde_json::from_str(&doc).unwrap();
-            assert_eq!((code, doc["columns"].as_str()), (0, Some(expected)), "{doc}");
+            assert_eq!(
+                (code, doc["columns"].as_str()),
+                (0, Some(expected)),
+                "{doc}"
+            );
         }
     }
 
