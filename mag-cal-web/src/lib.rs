@@ -203,7 +203,7 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
     };
     let skipped = table.skipped.note();
     let doc = json!({
-        "columns": table.columns.to_string(),
+        "columns": columns_in_page_terms(&table.columns),
         "rows": table.samples.len(),
         "raw": table.samples,
         "skipped": skipped,
@@ -231,7 +231,7 @@ pub fn fit_json(bytes: &[u8], options: &[u8], now_us: &dyn Fn() -> f64) -> (u32,
 /// The error line for the page: the CLI's, but in the page's terms. A
 /// refusal as planar, whose advice names `magcal planar`, names the page's
 /// planar fit instead; the reader's advice to pass `--columns` names the
-/// page's columns box.
+/// page's columns box ([`in_page_terms`]).
 pub fn message(err: &CliError) -> String {
     match err {
         CliError::Refused(cause @ Error::Planar { .. }) => format!(
@@ -241,14 +241,81 @@ pub fn message(err: &CliError) -> String {
     }
 }
 
-/// `text` with the CLI's `--columns` option named as the page's columns
-/// box (the page has no `--accel-columns`: it never reads accelerometers).
+/// The reader's advice that names `--columns`, phrase by phrase, and the
+/// page's words for it: every message of `mag-cal-cli/src/input.rs` (and
+/// `input/labelled.rs`) that names the option is rewritten whole, so that
+/// it names the columns box and only what the page offers (no header to
+/// add: the page reads the file as it is). The page has no
+/// `--accel-columns`: it never reads accelerometers. The unit tests build
+/// each of these messages with the reader and check the page's sentence.
+const COLUMNS_ADVICE: [(&str, &str); 10] = [
+    // A table of more than three numbers without a header.
+    (
+        "; add a header naming the columns and pass --columns X,Y,Z, or pass their \
+         field numbers (from 1), e.g. --columns ",
+        "; fill the columns box with their field numbers (from 1), e.g. ",
+    ),
+    // Names given, but the file has no header.
+    (
+        ": --columns needs a header line naming the columns, but line ",
+        ": names in the columns box need a header line naming the columns, but line ",
+    ),
+    (
+        "; or give their field numbers, e.g. --columns ",
+        "; or fill it with their field numbers, e.g. ",
+    ),
+    // A header with no, several or a repeated magnetometer triple.
+    (
+        "; pass --columns X,Y,Z (columns: ",
+        "; fill the columns box with the names of the three to use (columns: ",
+    ),
+    // Labelled lines: several magnetometers, none, or one in two units.
+    (
+        "; pass --columns with the three labels to use (e.g. --columns ",
+        "; fill the columns box with the three labels to use (e.g. ",
+    ),
+    (
+        ") or their numbers in the line (e.g. --columns ",
+        ") or their numbers in the line (e.g. ",
+    ),
+    (
+        "; pass --columns with the labels of the one to use (e.g. --columns ",
+        "; fill the columns box with the labels of the one to use (e.g. ",
+    ),
+    (
+        "; add the unit to each name (e.g. --columns ",
+        "; fill the columns box with the names and their unit (e.g. ",
+    ),
+    // MotionCal lines with names in the box.
+    (
+        ": MotionCal Raw: lines have no header: --columns does not apply",
+        ": MotionCal Raw: lines have no header: empty the columns box",
+    ),
+    // The one message that names `--columns` only in its example.
+    ("(e.g. --columns ", "(e.g. "),
+];
+
+/// `text`, one of the CLI's error lines, with its advice in the page's
+/// terms ([`COLUMNS_ADVICE`]).
 fn in_page_terms(text: &str) -> String {
-    text.replace("pass --columns with", "fill the columns box with")
-        .replace("pass --columns", "fill the columns box with")
-        .replace("--columns does not apply", "the columns box does not apply")
-        .replace("--columns)", "columns box)")
-        .replace("--columns ", "")
+    COLUMNS_ADVICE
+        .iter()
+        .fold(text.to_owned(), |text, (cli, page)| text.replace(cli, page))
+}
+
+/// The columns a fit read, in the page's terms: what the CLI reports as
+/// picked by `--columns` is picked by the columns box.
+fn columns_in_page_terms(used: &ColumnsUsed) -> String {
+    let text = used.to_string();
+    match used.picked {
+        // `names (--columns)`, `fields 7,8,9 (--columns)`, `names
+        // (fields 4,2,3, --columns)`: the option ends the text.
+        Picked::Named | Picked::Fields(_) => match text.strip_suffix("--columns)") {
+            Some(head) => format!("{head}the columns box)"),
+            None => text,
+        },
+        _ => text,
+    }
 }
 
 /// The JSON of a refused or failed fit, and its exit code.
@@ -521,8 +588,13 @@ fn offer_index(offer: Offer) -> usize {
 /// The core's names and layout for the page's controls: `methods` (names,
 /// the default first), the collector's coverage grid (`bands`, `sectors`,
 /// `cells`: cell `band * sectors + sector`, bands from the south pole,
-/// sectors of longitude from +x counter-clockwise) and `live_capacity`.
+/// sectors of longitude from +x counter-clockwise), `live_capacity`, and
+/// the limits the core's fits judge by, which the page's figures quote:
+/// `limits["3d"]` ([`mag_cal_core::quality::Thresholds::DEFAULT`]) and
+/// `limits.planar` ([`mag_cal_core::planar::PlanarThresholds::DEFAULT`],
+/// with the number of `sectors` of turn angle counted).
 pub fn info_json() -> Value {
+    use mag_cal_core::{planar, quality};
     let default = Config::default().method;
     let methods: Vec<&str> = std::iter::once(default)
         .chain(Method::ALL.into_iter().filter(|m| *m != default))
@@ -534,6 +606,25 @@ pub fn info_json() -> Value {
         "sectors": mag_cal_core::collector::SECTORS,
         "cells": mag_cal_core::collector::CELLS,
         "live_capacity": LIVE_CAPACITY,
+        // The measured constants as written (the thresholds hold them as
+        // f32, which would show 0.2 as 0.200000003).
+        "limits": {
+            "3d": {
+                "warn_fit_error": quality::WARN_FIT_ERROR,
+                "refuse_fit_error": quality::REFUSE_FIT_ERROR,
+                "refuse_coverage": quality::REFUSE_COVERAGE,
+                "refuse_flatness": quality::REFUSE_FLATNESS,
+                "refuse_distortion": quality::REFUSE_DISTORTION,
+                "refuse_lack_of_fit": quality::REFUSE_LACK_OF_FIT,
+                "refuse_outlier_share": quality::REFUSE_OUTLIER_SHARE,
+            },
+            "planar": {
+                "refuse_fit_error": quality::REFUSE_FIT_ERROR,
+                "refuse_not_planar": planar::REFUSE_NOT_PLANAR,
+                "min_sectors": planar::MIN_SECTORS,
+                "sectors": planar::SECTORS,
+            },
+        },
     })
 }
 
@@ -915,6 +1006,180 @@ mod tests {
         // SAFETY: null options are the defaults.
         assert_eq!(unsafe { mc_live_fit(std::ptr::null(), 0) }, 3);
         assert_eq!(out()["status"], "refused");
+    }
+
+    /// The limits the page quotes are the core's.
+    #[test]
+    fn the_info_gives_the_limits_the_fits_judge_by() {
+        use mag_cal_core::planar::PlanarThresholds;
+        use mag_cal_core::quality::Thresholds;
+        let limits = &info_json()["limits"];
+        let f = |v: &Value| v.as_f64().map(|v| v as f32);
+        let t = Thresholds::DEFAULT;
+        let full = &limits["3d"];
+        assert_eq!(f(&full["warn_fit_error"]), Some(t.warn_fit_error));
+        assert_eq!(f(&full["refuse_fit_error"]), Some(t.refuse_fit_error));
+        assert_eq!(f(&full["refuse_coverage"]), Some(t.refuse_coverage));
+        assert_eq!(f(&full["refuse_flatness"]), Some(t.refuse_flatness));
+        assert_eq!(f(&full["refuse_distortion"]), Some(t.refuse_distortion));
+        assert_eq!(f(&full["refuse_lack_of_fit"]), Some(t.refuse_lack_of_fit));
+        assert_eq!(
+            f(&full["refuse_outlier_share"]),
+            Some(t.refuse_outlier_share)
+        );
+        let p = PlanarThresholds::DEFAULT;
+        let planar = &limits["planar"];
+        assert_eq!(f(&planar["refuse_fit_error"]), Some(p.refuse_fit_error));
+        assert_eq!(f(&planar["refuse_not_planar"]), Some(p.refuse_not_planar));
+        assert_eq!(
+            planar["min_sectors"].as_u64(),
+            Some(u64::from(p.min_sectors))
+        );
+        assert_eq!(
+            planar["sectors"].as_u64(),
+            Some(u64::from(mag_cal_core::planar::SECTORS))
+        );
+    }
+
+    /// Every reader's message that names `--columns`, built by the reader
+    /// from an input that gives it: the page's sentence names the columns
+    /// box and no option, offers no header to add, and keeps the rest of
+    /// the CLI's sentence (its reason, and its example without the
+    /// option).
+    #[test]
+    fn every_columns_advice_reads_in_the_page_terms() {
+        let cases: [(&str, Option<&str>, &str); 10] = [
+            (
+                "Raw:0,0,0,0,0,0,1,2,3\n",
+                Some("x,y,z"),
+                "t.csv: MotionCal Raw: lines have no header: empty the columns box",
+            ),
+            (
+                "1,2,3\n4,5,6\n",
+                Some("a,b,c"),
+                "t.csv: names in the columns box need a header line naming the columns, \
+                 but line 1 is data; or fill it with their field numbers, e.g. 1,2,3",
+            ),
+            (
+                "1,2,3,4,5\n2,3,4,5,6\n",
+                None,
+                "; fill the columns box with their field numbers (from 1), e.g. ",
+            ),
+            (
+                "magx,mag_x,magy,magz\n1,2,3,4\n",
+                None,
+                "t.csv: 4 numeric columns and the header repeats a magnetometer axis \
+                 (magx, mag_x, magy, magz); fill the columns box with the names of the \
+                 three to use (columns: magx, mag_x, magy, magz)",
+            ),
+            (
+                "a,b,c,d\n1,2,3,4\n",
+                None,
+                "; fill the columns box with the names of the three to use (columns: a, b, c, d)",
+            ),
+            (
+                "mag_x,mag_y,mag_z,raw_mag_x,raw_mag_y,raw_mag_z\n1,2,3,4,5,6\n",
+                None,
+                "; fill the columns box with the names of the three to use (columns: ",
+            ),
+            (
+                "X: 1900 Y: -12900 Z: 17400\nX: 19 Y: -129 Z: 174 uTesla\n",
+                Some("x,y,z"),
+                "t.csv: the values named 'x', 'y', 'z' come in 2 units (no unit, uTesla); \
+                 fill the columns box with the names and their unit (e.g. \
+                 x[uTesla],y[uTesla],z[uTesla])",
+            ),
+            (
+                "X: 1 Y: 2 Z: 3 uT\nX: 1 Y: 2 Z: 3 gauss\n",
+                None,
+                "; fill the columns box with the labels of the one to use (e.g. \
+                 x[uT],y[uT],z[uT])",
+            ),
+            (
+                "Accel X: 1 Y: 2 Z: 3 m/s^2\nGyro X: 1 Y: 2 Z: 3 dps\n",
+                None,
+                "; fill the columns box with the three labels to use (e.g. \
+                 accelx,accely,accelz) or their numbers in the line (e.g. 1,2,3)",
+            ),
+            (
+                "Mag X: 1 Y: 2 Z: 3 uT\nmx = 1 my = 2 mz = 3 mG\n",
+                None,
+                "; fill the columns box with the labels of the one to use (e.g. \
+                 magx,magy,magz)",
+            ),
+        ];
+        for (text, columns, expected) in cases {
+            let cli = input::parse(
+                text.as_bytes(),
+                columns.map(|c| parse_columns(c).unwrap()).as_ref(),
+                "t.csv",
+            )
+            .unwrap_err();
+            assert!(cli.to_string().contains("--columns"), "{cli}");
+            let options = json!({ "name": "t.csv", "columns": columns.unwrap_or("") });
+            let (code, doc) = fit_json(text.as_bytes(), options.to_string().as_bytes(), &|| 0.0);
+            let doc: Value = serde_json::from_str(&doc).unwrap();
+            let page = doc["message"].as_str().unwrap();
+            assert_eq!(code, 2, "{page}");
+            assert!(page.contains(expected), "{page}\n  expected {expected}");
+            assert!(page.contains("columns box"), "{page}");
+            assert!(
+                !page.contains("--") && !page.contains("add a header"),
+                "{page}"
+            );
+            // The reason before the advice is the CLI's (where it does
+            // not name the option itself).
+            let cli = cli.to_string();
+            let reason = |m: &str| m.split(';').next().unwrap_or("").to_owned();
+            if !reason(&cli).contains("--columns") {
+                assert_eq!(reason(page), reason(&cli), "{page}");
+            }
+        }
+        // The messages of the reader that name `--columns`, outside its
+        // tests and comments: three in how a report names the columns,
+        // and those above (the option's name passed to one of them). A
+        // new one needs a case above and, when its phrase is new, a line
+        // of COLUMNS_ADVICE.
+        let named = |source: &str| {
+            source
+                .split("#[cfg(test)]")
+                .next()
+                .unwrap_or("")
+                .lines()
+                .filter(|l| !l.trim_start().starts_with("//") && l.contains("--columns"))
+                .count()
+        };
+        assert_eq!(named(include_str!("../../mag-cal-cli/src/input.rs")), 10);
+        assert_eq!(
+            named(include_str!("../../mag-cal-cli/src/input/labelled.rs")),
+            4
+        );
+    }
+
+    /// The columns line of a fit by the columns box names the box.
+    #[test]
+    fn columns_picked_by_the_box_are_said_so() {
+        let rows = csv(&ellipsoid(300));
+        let wide: String = String::from_utf8(rows.clone())
+            .unwrap()
+            .lines()
+            .map(|l| format!("0,{l},1\n"))
+            .collect();
+        let named = format!("t,mx,my,mz,q\n{wide}");
+        for (text, columns, expected) in [
+            (&wide, "2,3,4", "fields 2,3,4 (the columns box)"),
+            (&named, "mx,my,mz", "mx,my,mz (the columns box)"),
+            (&named, "2,3,4", "mx,my,mz (fields 2,3,4, the columns box)"),
+        ] {
+            let options = json!({ "columns": columns }).to_string();
+            let (code, doc) = fit_json(text.as_bytes(), options.as_bytes(), &|| 0.0);
+            let doc: Value = serde_json::from_str(&doc).unwrap();
+            assert_eq!(
+                (code, doc["columns"].as_str()),
+                (0, Some(expected)),
+                "{doc}"
+            );
+        }
     }
 
     #[test]

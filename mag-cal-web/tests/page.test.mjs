@@ -325,6 +325,13 @@ test('a planar recording after a good fit: the refusal clears every result and o
   const [pcode, cli] = magcalPlanar(file);
   assert.equal(pcode, 0);
   await assertSamePlanar(page, cli);
+  // The limits quoted beside the figures are the core's.
+  const limits = await page.evaluate(() => window.magcal.core.info().limits.planar);
+  const figuresText = await page.textContent('#figures');
+  assert.doesNotMatch(figuresText, /undefined|NaN/);
+  for (const quoted of [`refused above ${limits.refuse_fit_error}`, `refused above ${limits.refuse_not_planar} (not turns`, `of ${limits.sectors} sectors`, `refused below ${limits.min_sectors}`]) {
+    assert.ok(figuresText.includes(quoted), `${quoted} in ${figuresText}`);
+  }
   await page.screenshot({ path: join(SHOTS, 'planar-planar_243.png'), fullPage: true });
   // The download is that JSON, and `magcal apply` reads it: its headings
   // are those the page computed from it.
@@ -446,11 +453,19 @@ function rawStream(rows) {
 // navigator.serial replaced by a port that plays `text` back in small
 // chunks (from the start at each open) and records what the page writes.
 // Like Chromium's, it refuses to close while its readable stream is locked.
-function serialDouble(text) {
+// With `more`, a board that goes on sending: after `text` the port waits
+// (window.__waiting) until the test sets window.__release, plays `more`,
+// and then stays open, silent, until the page cancels the read.
+function serialDouble(text, more = null) {
   window.__written = [];
   window.__opens = 0;
   window.__closes = 0;
-  const bytes = new TextEncoder().encode(text);
+  const encode = (t) => new TextEncoder().encode(t);
+  const wait = (done) =>
+    new Promise((r) => {
+      const poll = () => (done() ? r() : setTimeout(poll, 5));
+      poll();
+    });
   const port = {
     readable: null,
     writable: null,
@@ -458,9 +473,20 @@ function serialDouble(text) {
       if (this.readable) throw new DOMException('The port is already open.', 'InvalidStateError');
       window.__baud = options.baudRate;
       window.__opens += 1;
+      let bytes = encode(text);
+      let rest = more === null ? [] : [more];
       let at = 0;
+      let cancelled = false;
       this.readable = new ReadableStream({
         async pull(controller) {
+          if (at >= bytes.length && more !== null) {
+            window.__waiting = true;
+            await wait(() => cancelled || (rest.length ? window.__release : false));
+            if (cancelled) return;
+            if (!rest.length) return;
+            bytes = encode(rest.shift());
+            at = 0;
+          }
           if (at >= bytes.length) {
             controller.close();
             return;
@@ -468,6 +494,9 @@ function serialDouble(text) {
           await new Promise((r) => setTimeout(r, 1));
           controller.enqueue(bytes.slice(at, at + 200));
           at += 200;
+        },
+        cancel() {
+          cancelled = true;
         },
       });
       this.writable = new WritableStream({
@@ -511,7 +540,8 @@ function motioncalPacket(cal) {
 
 test('a Raw: stream through the serial port: progress, coverage, fit, and send to board', async () => {
   const rows = streamRows();
-  const stream = rawStream(rows);
+  // A sensor's wild start-up value first, after the sketch's banner.
+  const stream = rawStream(rows).replace('\r\n', '\r\nRaw:0,0,0,0,0,0,30000,-30000,30000\r\n');
   const { page, errors, context } = await openPage([serialDouble.toString(), `serialDouble(${JSON.stringify(stream)});`].join('\n'));
   await page.click('#connect');
   await page.waitForFunction(() => window.magcal.streamEnded === true, null, { timeout: 60_000 });
@@ -532,9 +562,9 @@ test('a Raw: stream through the serial port: progress, coverage, fit, and send t
   assert.equal(p.refused.not_finite, 1, JSON.stringify(p.refused));
   assert.equal(p.refused.glitch, 1, JSON.stringify(p.refused));
   assert.ok(p.refused.outlier >= 1, JSON.stringify(p.refused));
-  // The recording starts with the board lying still, then a stretch that
-  // the first samples' sphere does not fit: the collection starts over
-  // (twice on this stream, at rows 137 and 323), and the page says so.
+  // The wild first reading drags the first samples' centre away: the
+  // collection starts over, and the page says so. (The board lying still
+  // at the start of the recording adds one sample and no restart.)
   assert.ok(p.refused.restarted >= 1, JSON.stringify(p));
   assert.match(progressText, new RegExp(`restarts: ${p.refused.restarted} \\(.*; ${p.discarded} samples discarded\\)`));
   assert.match(progressText, new RegExp(`not kept: cut short or not numbers: 1, glitches \\(zeros, rails\\): 1, outliers \\(far from the others\\): ${p.refused.outlier}`));
@@ -581,6 +611,60 @@ test('a Raw: stream through the serial port: progress, coverage, fit, and send t
     })
     .sort((a, b) => a - b);
   assert.ok(off[Math.floor(off.length / 2)] < 0.02 && off[off.length - 1] < 0.1, `median ${off[Math.floor(off.length / 2)]}`);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+// A board turned about a steady field: `n` Raw: lines on an ellipsoid
+// about `centre`, in a turning board's order (a spiral from pole to pole).
+function turningBoard(n, centre) {
+  let phi = 0;
+  const lines = [];
+  for (let i = 0; i < n; i += 1) {
+    const z = 1 - (2 * (i + 0.5)) / n;
+    const r = Math.sqrt(1 - z * z);
+    phi += 3.6 / Math.sqrt(n) / r;
+    const m = [centre[0] + 400 * r * Math.cos(phi), centre[1] + 460 * r * Math.sin(phi), centre[2] + 430 * z];
+    lines.push(`Raw:0,0,0,0,0,0,${m.map(Math.round).join(',')}`);
+  }
+  return `${lines.join('\r\n')}\r\n`;
+}
+
+test('a live refit that is refused takes the earlier calibration off the page, send to board too', async () => {
+  // A good collection; then the board's hard iron moves by about half the
+  // field (a magnet or a steel mount brought near), and the board goes on
+  // turning and sending.
+  const good = turningBoard(600, [120, -80, 35]);
+  const moved = turningBoard(600, [320, 120, 35]);
+  const init = [serialDouble.toString(), `serialDouble(${JSON.stringify(good)}, ${JSON.stringify(moved)});`].join('\n');
+  const { page, errors, context } = await openPage(init);
+  await page.click('#connect');
+  await page.waitForFunction(() => window.__waiting === true && window.magcal.result?.status === 'ok', null, { timeout: 60_000 });
+  assert.match(await page.textContent('#verdict'), /^Calibrated: serial/);
+  assert.deepEqual((await resultShown(page)).enabled, ['download', 'copy-c', 'copy-rust', 'send']);
+
+  await page.evaluate(() => {
+    window.__release = true;
+  });
+  // The automatic refits of the collection that now holds both: refused
+  // while the board still sends (the stream has not ended).
+  await page.waitForFunction(() => document.querySelector('#verdict').textContent.startsWith('Refused'), null, { timeout: 60_000 });
+  assert.equal(await page.evaluate(() => window.magcal.streamEnded), false);
+  assert.match(await page.textContent('#verdict'), /^Refused: serial/);
+  await assertCleared(page);
+  const message = await page.textContent('#message');
+  assert.match(message, /^calibration refused: /);
+  assert.doesNotMatch(message, /magcal|--\w/);
+  assert.equal(await page.textContent('#status'), message);
+  // The send button stays off, and a click sends nothing.
+  await page.dispatchEvent('#send', 'click');
+  assert.deepEqual(await page.evaluate(() => window.__written), []);
+  await page.screenshot({ path: join(SHOTS, 'serial-refit-refused.png'), fullPage: true });
+
+  await page.click('#disconnect');
+  await page.waitForFunction(() => window.magcal.streamEnded === true);
+  assert.match(await page.textContent('#verdict'), /^Refused: serial/);
+  await assertCleared(page);
   assert.deepEqual(errors, []);
   await context.close();
 });

@@ -248,7 +248,12 @@ function fitLive(force) {
     coreFailed(err);
     return;
   }
-  if (doc.status === 'ok' || force) showResult(doc, 'serial');
+  // Once a result is on the page, every refit replaces it: a refused one
+  // takes the earlier calibration off (its snippets, downloads and send to
+  // board), as a refused file does. Before any, an automatic refit that is
+  // refused leaves the page to the progress (a planar collection is
+  // refused until its turns suffice).
+  if (doc.status === 'ok' || force || !$('result').hidden) showResult(doc, 'serial');
 }
 
 // Disconnect: the read loop ends (and fits what it has), the pipe lets go
@@ -319,7 +324,7 @@ function showProgress(p) {
     `${p.cells_visited} of ${p.cells} cells${p.ready ? ', ready' : ''}` +
     (refused.length ? `; not kept: ${refused.join(', ')}` : '') +
     (p.refused.restarted
-      ? `; restarts: ${p.refused.restarted} (a wild first reading, the board lying still at first, or a long run of readings far from those kept; ${p.discarded} samples discarded)`
+      ? `; restarts: ${p.refused.restarted} (a wild reading among the first, or a long run of readings far from those kept, as after the sensor moved; ${p.discarded} samples discarded)`
       : '');
   for (const cell of $('cells').children) {
     cell.classList.toggle('visited', p.visited[cell.dataset.cell]);
@@ -436,17 +441,18 @@ function show3d(doc) {
   const f = doc.fit;
   const q = f.quality;
   const w = f.soft_iron;
+  const lim = info.limits['3d'];
   $('figures').innerHTML = `<table class="figures">
     ${figure('hard iron b', `<span class="vec">${f.hard_iron.map((v, i) => `<span data-name="b${i}" data-value="${v}">${digits(v)}</span>`).join(' ')}</span>`, 'sensor units')}
     ${figure('soft iron W', `<span class="mat">${w.map((row, r) => row.map((v, c) => `<span data-name="W${r}${c}" data-value="${v}">${digits(v)}</span>`).join(' ')).join('<br>')}</span>`, 'W (y − b) on the unit sphere')}
     ${figure('field strength', f.field_strength, 'sensor units')}
     ${figure('radial RMS', q.radial_rms, 'of the field')}
-    ${figure('fit error', q.fit_error, 'robust sigma; warned above 0.05, refused above 0.2')}
-    ${figure('coverage', q.coverage, 'refused below 0.05; full sphere about 0.33')}
-    ${figure('flatness', q.flatness, 'refused below 0.03')}
-    ${figure('distortion', q.distortion, 'condition number of M; refused above 16')}
-    ${figure('lack of fit', q.lack_of_fit, 'systematic misfit; refused above 0.01 when significant')}
-    ${figure('outlier share', q.outlier_share, 'refused above 0.25')}
+    ${figure('fit error', q.fit_error, `robust sigma; warned above ${lim.warn_fit_error}, refused above ${lim.refuse_fit_error}`)}
+    ${figure('coverage', q.coverage, `refused below ${lim.refuse_coverage}; full sphere about 0.33`)}
+    ${figure('flatness', q.flatness, `refused below ${lim.refuse_flatness}`)}
+    ${figure('distortion', q.distortion, `condition number of M; refused above ${lim.refuse_distortion}`)}
+    ${figure('lack of fit', q.lack_of_fit, `systematic misfit; refused above ${lim.refuse_lack_of_fit} when significant`)}
+    ${figure('outlier share', q.outlier_share, `refused above ${lim.refuse_outlier_share}`)}
     ${figure('columns', html(doc.columns))}
     ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
     ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
@@ -463,15 +469,16 @@ const vector = (prefix, v) =>
 function showPlanar(doc) {
   const f = doc.fit;
   const align = options('').align;
+  const lim = info.limits.planar;
   $('figures').innerHTML = `<table class="figures">
     ${figure('turn axis', vector('a', f.axis), `unit vector; ${digits(f.axis_tilt_deg, 3)} deg from the up axis ${f.up}`)}
     ${figure('centre', vector('c', f.centre), 'sensor units: the hard iron in the plane; along the axis it is not observable')}
     ${figure('K', `<span class="mat">${f.matrix.map((row, r) => row.map((v, c) => `<span data-name="K${r}${c}" data-value="${v}">${digits(v)}</span>`).join(' ')).join('<br>')}</span>`, 'u = K (y − centre) on the unit circle; heading = angle(u) − zero')}
     ${figure('zero', f.zero_deg, align ? `deg: row ${html(align)}` : 'deg, arbitrary: set “heading 0 at” above')}
     ${figure('field in the plane', f.plane_strength, 'sensor units')}
-    ${figure('fit error', f.fit_error, 'robust sigma of |u| − 1; refused above 0.2')}
-    ${figure('flatness', f.flatness, `refused above 0.06 (not turns about one axis); thickness ${digits(f.thickness, 3)} of the field in the plane`)}
-    ${figure('coverage', `<span data-name="sectors" data-value="${f.sectors}">${f.sectors}</span> of 12 sectors of 30 deg`, 'refused below 8')}
+    ${figure('fit error', f.fit_error, `robust sigma of |u| − 1; refused above ${lim.refuse_fit_error}`)}
+    ${figure('flatness', f.flatness, `refused above ${lim.refuse_not_planar} (not turns about one axis); thickness ${digits(f.thickness, 3)} of the field in the plane`)}
+    ${figure('coverage', `<span data-name="sectors" data-value="${f.sectors}">${f.sectors}</span> of ${lim.sectors} sectors of ${360 / lim.sectors} deg`, `refused below ${lim.min_sectors}`)}
     ${figure('columns', html(doc.columns))}
     ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
     ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
