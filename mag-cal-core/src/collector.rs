@@ -40,11 +40,11 @@
 //! kept by more than the sensor's noise: [`NOISE_SPACING`] = 10 standard
 //! deviations, measured on the readings smoothed over about 7 readings
 //! (exponential weight 1/4), and at least 3 quanta of quantised readings
-//! (3 counts for integer samples). Without this rule a device lying still
-//! when the collection starts filled the store: before the centre is known
-//! its noise points every way from a centre inside the noise, so 300
-//! readings filled the 36 cells readiness asks for, and the collector said
-//! ready on samples the core refuses.
+//! (3 counts for integer samples). The rule guards a device lying still
+//! when the collection starts: before the centre is known its noise
+//! points every way from a centre inside the noise, and readings spaced
+//! by direction alone fill the 36 cells readiness asks for within 300
+//! readings, on samples the core refuses.
 //!
 //! The noise is learnt from the readings themselves, whatever their unit:
 //! noise makes consecutive steps `d_k = y_k - y_(k-1)` point against each
@@ -53,7 +53,7 @@
 //! estimate `sigma^2 = max(0, -mean(d_k . d_(k-1))) / 3` is therefore the
 //! noise of a device lying still and about zero for one that turns, even
 //! coarsely sampled: recordings at 11 deg a reading collect as fast as
-//! before. The mean takes evidence of noise quicker (weight 1/16) than it
+//! when spaced by direction alone. The mean takes evidence of noise quicker (weight 1/16) than it
 //! lets go of it (1/32), so a device that stops is soon recognised and one
 //! that starts turning is spaced at most by the noise; its inputs are
 //! clipped at 4 times their typical size (a wild reading moves it by a
@@ -70,13 +70,11 @@
 //! quantisation (20 seeds, 30 000 readings) correlation 0.5 stored up to
 //! 19 samples and 0.7 up to 71: strongly filtered noise looks like slow
 //! motion, and the progress of such a device creeps up (it was never
-//! ready in these runs). Real recordings are not slowed (readings to
-//! ready with capacity 600, before the rule and after:
-//! `icm20948_mag_300.csv` 131 and 121, `mag3_raw_541.csv` 175 and 182,
-//! after a still start of 300 to 30 000 readings 128 and 182-186).
-//! `magcal_25598.txt` starts lying still: before, the collector said
-//! ready after 841 readings on a noise ball that did not calibrate; now,
-//! with capacity 4 000, after 4 953 readings on samples that calibrate
+//! ready in these runs). Real recordings, readings to ready with capacity
+//! 600: `icm20948_mag_300.csv` 121, `mag3_raw_541.csv` 182, and after a
+//! still start of 300 to 30 000 readings 128 and 182-186.
+//! `magcal_25598.txt` starts lying still; with capacity 4 000 the
+//! collector is ready after 4 953 readings, on samples that calibrate
 //! (with 600 it fills at 35 cells: the recording turns mostly about one
 //! axis for its first 5 000 readings). `cargo test -p host-tests --test
 //! collector_real -- --nocapture`.
@@ -87,9 +85,9 @@
 //! readings, look like noise of the size of the field, and little is
 //! kept. Measured (field 320 counts, noise 2.3 counts, a random walk of
 //! the field direction with a fresh random step direction every reading,
-//! readings to ready before the rule and after): 5 deg steps 1 592 and
-//! 2 706, 10 deg 434 and 1 079, 20 deg 99 and 1 811, 30 deg 99 and never
-//! (3 000 readings); a steady turn is unaffected up to 60 deg a reading.
+//! readings to ready): 5 deg steps 2 706, 10 deg 1 079, 20 deg 1 811,
+//! 30 deg never (3 000 readings); a steady turn collects as when spaced by
+//! direction alone up to 60 deg a reading.
 //! A device turned by hand and read at 5 Hz or more turns smoothly between
 //! readings.
 //!

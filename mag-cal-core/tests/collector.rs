@@ -565,9 +565,10 @@ fn still(sensor: &mut Sensor, h: &Vector3<f64>, n: usize, sigma: f64, a: f64) ->
 }
 
 /// A device lying still, however long and whatever its noise, stores
-/// (almost) nothing: its progress stays near 0 and it is never ready.
-/// Before, its noise, pointing every way from a centre inside it, filled
-/// the 36 cells readiness asks for within 300 readings.
+/// (almost) nothing: its progress stays near 0 and it is never ready. Its
+/// noise points every way from a centre inside it; spaced by direction
+/// alone it would fill the 36 cells readiness asks for within 300
+/// readings.
 #[test]
 fn a_device_lying_still_never_becomes_ready() {
     let h = Vector3::new(0.3, -0.5, 0.8).normalize();
