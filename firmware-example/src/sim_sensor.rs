@@ -564,9 +564,9 @@ pub type CalibrationStorage = FlashStorage<SimFlash>;
 pub const STORAGE_NAME: &str = "flash stand-in (4 KiB of RAM; QEMU has no NVMC)";
 
 /// Samples the simulated device lies still at the start of each collection
-/// before it turns: 20 s at the firmware's 20 Hz. The collector must not
-/// take its noise for coverage (it did before it learnt the sensor's
-/// noise: ready within 300 readings, and the calibration refused).
+/// before it turns: 20 s at the firmware's 20 Hz. The collector keeps one
+/// sample of it (`mag_cal_core::collector::NOISE_SPACING`) and fills once
+/// the device turns; the run checks that the collection then calibrates.
 pub const STILL_START: u32 = 400;
 
 /// The simulated hardware.

@@ -76,9 +76,8 @@ fn a_still_start_then_a_recording_calibrates() {
 /// Real still noise: `magcal_25598.txt` lies still for its rows 50..200
 /// (per-axis spread 0.003 of a 0.6 field, 0.5 %). Those rows played 200
 /// times over (30 000 readings) keep one sample; the whole recording
-/// after them collects as it does alone (ready after 4 953 readings with
-/// capacity 4 000; the collector before the noise rule said ready after
-/// 841 on a noise ball that did not calibrate).
+/// after them collects as it does alone (ready after 4 952 readings with
+/// capacity 4 000).
 #[test]
 fn real_still_noise_keeps_nothing() {
     let rows = read_xyz("magcal_25598.txt");

@@ -40,11 +40,11 @@
 //! kept by more than the sensor's noise: [`NOISE_SPACING`] = 10 standard
 //! deviations, measured on the readings smoothed over about 7 readings
 //! (exponential weight 1/4), and at least 3 quanta of quantised readings
-//! (3 counts for integer samples). Without this rule a device lying still
-//! when the collection starts filled the store: before the centre is known
-//! its noise points every way from a centre inside the noise, so 300
-//! readings filled the 36 cells readiness asks for, and the collector said
-//! ready on samples the core refuses.
+//! (3 counts for integer samples). The rule guards a device lying still
+//! when the collection starts: before the centre is known its noise
+//! points every way from a centre inside the noise, and readings spaced
+//! by direction alone fill the 36 cells readiness asks for within 300
+//! readings, on samples the core refuses.
 //!
 //! The noise is learnt from the readings themselves, whatever their unit:
 //! noise makes consecutive steps `d_k = y_k - y_(k-1)` point against each
@@ -53,7 +53,7 @@
 //! estimate `sigma^2 = max(0, -mean(d_k . d_(k-1))) / 3` is therefore the
 //! noise of a device lying still and about zero for one that turns, even
 //! coarsely sampled: recordings at 11 deg a reading collect as fast as
-//! before. The mean takes evidence of noise quicker (weight 1/16) than it
+//! when spaced by direction alone. The mean takes evidence of noise quicker (weight 1/16) than it
 //! lets go of it (1/32), so a device that stops is soon recognised and one
 //! that starts turning is spaced at most by the noise; its inputs are
 //! clipped at 4 times their typical size (a wild reading moves it by a
@@ -61,24 +61,31 @@
 //! from the [`NOISE_READINGS`]-th (9th) reading on, when the estimate
 //! exists.
 //!
+//! Noise correlated from reading to reading (a sensor's low-pass filter,
+//! a host's smoothing) looks smaller to this estimate than it is (by the
+//! factor `1 - a` for correlation `a`), and a still device then stores
+//! some samples, all within the noise of a centre inside them.
+//! [`Collector::progress`] therefore counts a cell only when its sample is
+//! farther from the running centre than the spacing, averaged over about
+//! 256 readings: a sphere's samples are, unless the field is below 10
+//! noise standard deviations.
+//!
 //! Measured (`cargo test -p mag-cal-core --test collector -- --nocapture`,
 //! `a_device_lying_still_never_becomes_ready`: `i16`, 320-count field, 8
-//! seeds each): independent noise of 0.1, 0.3, 1, 2.5 and 3 counts for
-//! 300, 3 000 and 30 000 readings stores 1 sample; noise correlated from
-//! reading to reading (AR(1), as a low-pass filter makes it) at most 2
-//! (correlation 0.35), 3 (0.5) and 29 (0.7). On `f32` readings without
-//! quantisation (20 seeds, 30 000 readings) correlation 0.5 stored up to
-//! 19 samples and 0.7 up to 71: strongly filtered noise looks like slow
-//! motion, and the progress of such a device creeps up (it was never
-//! ready in these runs). Real recordings are not slowed (readings to
-//! ready with capacity 600, before the rule and after:
-//! `icm20948_mag_300.csv` 131 and 121, `mag3_raw_541.csv` 175 and 182,
-//! after a still start of 300 to 30 000 readings 128 and 182-186).
-//! `magcal_25598.txt` starts lying still: before, the collector said
-//! ready after 841 readings on a noise ball that did not calibrate; now,
-//! with capacity 4 000, after 4 953 readings on samples that calibrate
-//! (with 600 it fills at 35 cells: the recording turns mostly about one
-//! axis for its first 5 000 readings). `cargo test -p host-tests --test
+//! seeds each, in counts and as unquantised `f32`): independent noise of
+//! 0.1, 0.3, 1, 2.5 and 3 counts for 300, 3 000 and 30 000 readings stores
+//! 1 sample and shows 0 % progress; noise correlated from reading to
+//! reading (AR(1), as a low-pass filter makes it) stores at most 2
+//! samples (correlation 0.35), 3 (0.5), 29 and 72 (0.7, `i16` and `f32`)
+//! and 272 and 454 (0.8), and the highest progress at any reading is 0 %,
+//! 2 %, 6 % and 13 %, 72 % and 75 %: strongly filtered noise looks like
+//! slow motion (it was never ready in these runs). Real recordings,
+//! readings to ready with capacity 600: `icm20948_mag_300.csv` 120,
+//! `mag3_raw_541.csv` 181, and after a still start of 300 to 30 000
+//! readings 127 and 181-185. `magcal_25598.txt` starts lying still; with
+//! capacity 4 000 the collector is ready after 4 952 readings, on samples
+//! that calibrate (with 600 it fills at 35 cells: the recording turns
+//! mostly about one axis for its first 5 000 readings). `cargo test -p host-tests --test
 //! collector_real -- --nocapture`.
 //!
 //! The rule needs the readings in the order the sensor gave them, from a
@@ -87,9 +94,9 @@
 //! readings, look like noise of the size of the field, and little is
 //! kept. Measured (field 320 counts, noise 2.3 counts, a random walk of
 //! the field direction with a fresh random step direction every reading,
-//! readings to ready before the rule and after): 5 deg steps 1 592 and
-//! 2 706, 10 deg 434 and 1 079, 20 deg 99 and 1 811, 30 deg 99 and never
-//! (3 000 readings); a steady turn is unaffected up to 60 deg a reading.
+//! readings to ready): 5 deg steps 2 706, 10 deg 1 079, 20 deg 1 811,
+//! 30 deg never (3 000 readings); a steady turn collects as when spaced by
+//! direction alone up to 60 deg a reading.
 //! A device turned by hand and read at 5 Hz or more turns smoothly between
 //! readings.
 //!
@@ -318,6 +325,20 @@ const NO_WITNESS: usize = usize::MAX;
 /// factor `1 - a` for correlation `a`).
 pub const NOISE_SPACING: f32 = 10.0;
 
+/// Weight of a reading's spacing in the slow mean of the spacing that
+/// [`Collector::progress`] holds samples to (a stored sample marks its
+/// cell only when it is farther than that mean from the running centre,
+/// see "Still devices" in the [module documentation](self)). About 256
+/// readings: the noise estimate of a still device with correlated noise
+/// dips for tens of readings at a time; held to the spacing of the moment
+/// (even to twice it), a still `f32` device at correlation 0.7 showed
+/// 11 % after 300 readings, and one at 0.8 was ready for a moment. The
+/// floor is one mean spacing, not more: at 1.25 and above, a device
+/// jerked 20 deg a reading in random directions (field 320 counts, noise
+/// 2.3) was never ready in 3 000 readings (its noise estimate is a
+/// seventh of its step, the field only three steps).
+const SPACING_MEAN_WEIGHT: f32 = 1.0 / 256.0;
+
 /// Readings the collector takes to learn the sensor's noise: it stores the
 /// first reading offered, and no other before this many have been offered
 /// (the noise estimate needs seven pairs of consecutive steps).
@@ -399,6 +420,9 @@ struct NoiseGate {
     /// Smallest non-zero change of a component between consecutive
     /// readings (infinite before one is seen).
     quantum: f32,
+    /// Slow mean of the spacing ([`SPACING_MEAN_WEIGHT`]), zero before
+    /// the noise is known.
+    spacing_mean: f32,
 }
 
 impl NoiseGate {
@@ -410,6 +434,7 @@ impl NoiseGate {
         level: 0.0,
         product: 0.0,
         quantum: f32::INFINITY,
+        spacing_mean: 0.0,
     };
 
     /// Takes a (finite) reading; returns how far the smoothed position
@@ -442,7 +467,14 @@ impl NoiseGate {
         } else {
             0.0
         };
-        Some((NOISE_SPACING * sigma).max(quantum))
+        let spacing = (NOISE_SPACING * sigma).max(quantum);
+        let w = if usize::from(self.seen) == NOISE_READINGS {
+            1.0
+        } else {
+            SPACING_MEAN_WEIGHT
+        };
+        self.spacing_mean += w * (spacing - self.spacing_mean);
+        Some(spacing)
     }
 
     /// Updates the means with the step `d_k` (the previous one is
@@ -534,7 +566,9 @@ pub struct Progress {
     /// Samples stored.
     pub samples: usize,
     /// Direction cells holding a stored sample, as seen from the current
-    /// centre estimate (a lower bound, see the module documentation).
+    /// centre estimate (a lower bound, see the module documentation);
+    /// samples within the noise spacing of the centre do not count (see
+    /// "Still devices" there).
     pub cells_visited: usize,
     /// Number of cells, [`CELLS`].
     pub cells: usize,
@@ -1066,11 +1100,16 @@ impl<S: Sample, const N: usize> Collector<S, N> {
     /// ```
     pub fn progress(&self) -> Progress {
         let mut visited = [false; CELLS];
+        // Samples within the noise of the centre have no direction.
+        let near_sq = self.noise.spacing_mean * self.noise.spacing_mean;
         for &i in &self.witness {
             let Some(s) = self.samples.get(i) else {
                 continue;
             };
             let v = sub(s.xyz::<f32>(), self.centre);
+            if dot(&v, &v) <= near_sq {
+                continue;
+            }
             if let Some(seen) = cell(v).and_then(|c| visited.get_mut(c)) {
                 *seen = true;
             }
