@@ -2,70 +2,15 @@
 //! replayed over real recordings, checked against `magcal fit` (a batch fit
 //! of the same rows: two independent computations).
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
+use common::{magcal, real, temp_file, vec3};
 use serde_json::Value;
-
-/// The shared folder of real recordings, beside the repository root.
-const REAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/real/");
 
 /// Agreement asked of the background calibrator's final calibration with
 /// the batch fit: `|b - b_fit|` and `|rho - rho_fit|` within this share of
 /// the fitted field strength (the figure).
 const AGREE: f64 = 0.02;
-
-/// A finished run of the binary.
-struct Run {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-impl Run {
-    /// The stdout as one JSON object (any exit code).
-    fn json(&self) -> Value {
-        assert_eq!(self.stdout.lines().count(), 1, "one line: {}", self.stdout);
-        serde_json::from_str(&self.stdout).expect("stdout is JSON")
-    }
-
-    /// The JSON report of a successful run.
-    fn ok_json(&self) -> Value {
-        assert_eq!(self.code, 0, "stderr: {}", self.stderr);
-        self.json()
-    }
-}
-
-/// Runs `magcal` with `args`.
-fn magcal(args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    Run {
-        code: out.status.code().expect("exited, not killed by a signal"),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Path of a real recording.
-fn real(name: &str) -> String {
-    let path = format!("{REAL}{name}");
-    assert!(PathBuf::from(&path).is_file(), "missing test data {path}");
-    path
-}
-
-/// Writes `text` to a fresh file in Cargo's scratch directory.
-fn temp_file(name: &str, text: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::write(&path, text).expect("scratch file written");
-    path.display().to_string()
-}
-
-fn vec3(v: &Value) -> [f64; 3] {
-    [0, 1, 2].map(|i| v[i].as_f64().expect("a number"))
-}
 
 fn number(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
@@ -112,8 +57,8 @@ fn check_adoptions(v: &Value) {
 /// the whole file within 2 % of the field (b and field strength).
 fn agrees_with_fit(name: &str) -> (f64, f64) {
     let path = real(name);
-    let fit = magcal(&["fit", &path, "--format", "json"]).ok_json();
-    let bg = magcal(&["background", &path, "--format", "json"]).ok_json();
+    let fit = magcal(&["fit", &path, "--format", "json"]).json();
+    let bg = magcal(&["background", &path, "--format", "json"]).json();
     check_adoptions(&bg);
     let (db, drho) = disagreement(&bg, &fit);
     assert!(
@@ -144,7 +89,7 @@ fn the_final_calibration_agrees_with_fit_on_the_long_recording() {
 #[test]
 fn after_a_hard_iron_jump_it_agrees_with_fit_of_the_rows_after_it() {
     let path = real("magcal_25598.txt");
-    let rho = number(&magcal(&["fit", &path, "--format", "json"]).ok_json()["field_strength"]);
+    let rho = number(&magcal(&["fit", &path, "--format", "json"]).json()["field_strength"]);
     let text = std::fs::read_to_string(&path).expect("readable");
     let rows: Vec<[f64; 3]> = text
         .lines()
@@ -173,9 +118,9 @@ fn after_a_hard_iron_jump_it_agrees_with_fit_of_the_rows_after_it() {
         "background_after_jump.txt",
         &(lines[half..].join("\n") + "\n"),
     );
-    let bg = magcal(&["background", &jumped, "--format", "json"]).ok_json();
+    let bg = magcal(&["background", &jumped, "--format", "json"]).json();
     check_adoptions(&bg);
-    let fit = magcal(&["fit", &after, "--format", "json"]).ok_json();
+    let fit = magcal(&["fit", &after, "--format", "json"]).json();
     let (db, drho) = disagreement(&bg, &fit);
     // Measured: 0.0041 and 0.0004.
     assert!(
@@ -203,8 +148,8 @@ fn after_a_hard_iron_jump_it_agrees_with_fit_of_the_rows_after_it() {
 #[test]
 fn the_final_calibration_has_fits_fields_and_apply_reads_it() {
     let path = real("icm20948_mag_300.csv");
-    let fit = magcal(&["fit", &path, "--format", "json"]).ok_json();
-    let bg = magcal(&["background", &path, "--format", "json"]).ok_json();
+    let fit = magcal(&["fit", &path, "--format", "json"]).json();
+    let bg = magcal(&["background", &path, "--format", "json"]).json();
     let fin = bg["final"].as_object().expect("final is an object");
     for key in ["precision", "hard_iron", "soft_iron", "field_strength"] {
         let (a, b) = (&fin[key], &fit[key]);
@@ -225,7 +170,7 @@ fn the_final_calibration_has_fits_fields_and_apply_reads_it() {
     // (the fit error of this recording is 0.024).
     let cal = temp_file(
         "background_final.json",
-        &Value::Object(fin.clone()).to_string(),
+        Value::Object(fin.clone()).to_string(),
     );
     let applied = magcal(&["apply", &cal, &path]);
     assert_eq!(applied.code, 0, "{}", applied.stderr);
@@ -254,7 +199,7 @@ fn the_text_report_names_first_calibration_adoptions_and_final() {
         "--format",
         "json",
     ])
-    .ok_json();
+    .json();
     let first = json["first_calibration"].as_u64().expect("calibrated");
     let t = &r.stdout;
     assert!(t.starts_with("magcal background: "), "{t}");
@@ -286,7 +231,7 @@ fn glitch_rows_are_counted_and_named() {
     lines[10] = "0,0,0";
     lines[200] = "0,0,0";
     let path = temp_file("background_glitches.csv", &(lines.join("\n") + "\n"));
-    let v = magcal(&["background", &path, "--format", "json"]).ok_json();
+    let v = magcal(&["background", &path, "--format", "json"]).json();
     assert_eq!(v["readings"]["invalid"], 2, "{v}");
     assert_eq!(v["readings"]["invalid_rows"], serde_json::json!([10, 200]));
     let t = magcal(&["background", &path]).stdout;
@@ -302,7 +247,7 @@ fn a_recording_that_never_calibrates_gives_the_reason_and_exit_3() {
     let path = real("planar_243.txt");
     let r = magcal(&["background", &path, "--format", "json"]);
     assert_eq!(r.code, 3, "{}", r.stderr);
-    let v = r.json();
+    let v = r.any_json();
     assert!(v["final"].is_null(), "{v}");
     assert_eq!(v["adoptions"], serde_json::json!([]));
     assert!(v["first_calibration"].is_null());
@@ -332,7 +277,10 @@ fn a_recording_that_never_calibrates_gives_the_reason_and_exit_3() {
     let path = temp_file("background_short.csv", &(short.join("\n") + "\n"));
     let r = magcal(&["background", &path, "--format", "json"]);
     assert_eq!(r.code, 3, "{}", r.stderr);
-    let reason = r.json()["reason"].as_str().expect("a reason").to_owned();
+    let reason = r.any_json()["reason"]
+        .as_str()
+        .expect("a reason")
+        .to_owned();
     assert!(reason.starts_with("no refit ran in 30 rows: a refit needs 48 buffered samples in 20 of the 48 direction cells"), "{reason}");
 }
 
@@ -358,7 +306,7 @@ fn warnings_name_their_figures() {
     assert!(figure > limit, "{line}");
 
     let text = magcal(&["background", &real("mag3_raw_541.csv")]);
-    let json = magcal(&["background", &real("mag3_raw_541.csv"), "--format", "json"]).ok_json();
+    let json = magcal(&["background", &real("mag3_raw_541.csv"), "--format", "json"]).json();
     let share = json["final"]["quality"]["outlier_share"]
         .as_f64()
         .expect("a share");
@@ -400,9 +348,9 @@ fn labelled_lines_are_named_and_calibrate_as_the_plain_file() {
         .collect();
     let file = temp_file("background_labelled.txt", &lines);
     let columns = "Mag X (uT),Mag Y (uT),Mag Z (uT) (labelled values)";
-    let plain = magcal(&["background", &path, "--format", "json"]).ok_json();
+    let plain = magcal(&["background", &path, "--format", "json"]).json();
     let run = magcal(&["background", &file, "--format", "json"]);
-    let labelled = run.ok_json();
+    let labelled = run.json();
     // The JSON report names on stderr the values it took.
     assert_eq!(
         run.stderr,

@@ -1,108 +1,16 @@
 //! End-to-end tests of the `magcal` binary: real recordings, exit codes,
 //! error messages, and hostile input.
 
-use std::io::Write;
+mod common;
+
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
 
+use common::{magcal_in as magcal, read_xyz, real, temp_file, vec3, Run};
 use serde_json::Value;
-
-/// The shared folder of real recordings, beside the repository root.
-const REAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/real/");
 
 /// Magneto 1.4's hard iron on `icm20948_mag_300.csv` (after it rejected 10
 /// outliers), from `icm20948_mag_300.magneto14.lis`.
 const MAGNETO_B: [f64; 3] = [-156.70, -52.79, -141.07];
-
-/// A finished run of the binary.
-struct Run {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-impl Run {
-    /// Asserts a failure with `code` and exactly one `magcal: ` line on
-    /// stderr containing `reason`.
-    fn fails_with(&self, code: i32, reason: &str) {
-        assert_eq!(self.code, code, "stderr: {}", self.stderr);
-        assert_eq!(self.stderr.lines().count(), 1, "stderr: {:?}", self.stderr);
-        assert!(
-            self.stderr.starts_with("magcal: "),
-            "stderr: {}",
-            self.stderr
-        );
-        assert!(self.stderr.contains(reason), "stderr: {}", self.stderr);
-        assert!(self.stdout.is_empty(), "stdout: {}", self.stdout);
-    }
-
-    /// The stdout as the JSON report, after checking success.
-    fn json(&self) -> Value {
-        assert_eq!(self.code, 0, "stderr: {}", self.stderr);
-        assert_eq!(self.stdout.lines().count(), 1, "one line: {}", self.stdout);
-        serde_json::from_str(&self.stdout).expect("stdout is JSON")
-    }
-}
-
-/// Runs `magcal` with `args`, feeding `stdin` (empty when `None`).
-fn magcal(args: &[&str], stdin: Option<&[u8]>) -> Run {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_magcal"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("binary starts");
-    let input = stdin.unwrap_or_default().to_vec();
-    let mut pipe = child.stdin.take().expect("stdin piped");
-    // The child may exit before reading everything; a broken pipe is fine.
-    let writer = std::thread::spawn(move || {
-        let _ = pipe.write_all(&input);
-    });
-    let out = child.wait_with_output().expect("binary runs");
-    writer.join().expect("writer thread");
-    Run {
-        code: out.status.code().expect("exited, not killed by a signal"),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Path of a real recording.
-fn real(name: &str) -> String {
-    let path = format!("{REAL}{name}");
-    assert!(PathBuf::from(&path).is_file(), "missing test data {path}");
-    path
-}
-
-/// Writes `bytes` to a fresh file in Cargo's scratch directory.
-fn temp_file(name: &str, bytes: &[u8]) -> String {
-    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::write(&path, bytes).expect("scratch file written");
-    path.display().to_string()
-}
-
-/// Reads `x,y,z` rows of a header-less CSV.
-fn read_xyz(path: &str) -> Vec<[f64; 3]> {
-    std::fs::read_to_string(path)
-        .expect("readable")
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l
-                .split(',')
-                .map(|f| f.trim().parse().expect("number"))
-                .collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
-
-fn vec3(v: &Value) -> [f64; 3] {
-    let a = v.as_array().expect("array");
-    assert_eq!(a.len(), 3);
-    [0, 1, 2].map(|i| a[i].as_f64().expect("number"))
-}
 
 fn mat3(v: &Value) -> [[f64; 3]; 3] {
     let rows = v.as_array().expect("array of rows");
@@ -738,7 +646,7 @@ fn hostile_input_never_panics() {
         }
     }
     // The same through a file path.
-    let path = temp_file("garbage.bin", &rng.bytes(5000, &[]));
+    let path = temp_file("garbage.bin", rng.bytes(5000, &[]));
     let r = magcal(&["fit", &path], None);
     assert_eq!(r.code, 2, "{}", r.stderr);
 }

@@ -5,90 +5,15 @@
 //! calibrates as the plain file does, and the report names what it took;
 //! what cannot be told apart is refused with what was found (exit 2).
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
+use common::{magcal, read_xyz, real, temp_file};
 use serde_json::Value;
-
-/// The shared folder of real recordings, beside the repository root.
-const REAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/real/");
-
-/// A finished run of the binary.
-struct Run {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-impl Run {
-    /// The stdout as the JSON report, after checking success.
-    fn json(&self) -> Value {
-        assert_eq!(self.code, 0, "stderr: {}", self.stderr);
-        serde_json::from_str(&self.stdout).expect("stdout is JSON")
-    }
-
-    /// Asserts a failure with exit 2 and one `magcal: ` line holding
-    /// `reason`.
-    fn refused_with(&self, reason: &str) {
-        assert_eq!(
-            self.code, 2,
-            "stdout: {} stderr: {}",
-            self.stdout, self.stderr
-        );
-        assert_eq!(self.stderr.lines().count(), 1, "{}", self.stderr);
-        assert!(self.stderr.starts_with("magcal: "), "{}", self.stderr);
-        assert!(self.stderr.contains(reason), "{}", self.stderr);
-        assert!(self.stdout.is_empty(), "{}", self.stdout);
-    }
-}
-
-/// Runs `magcal` with `args`.
-fn magcal(args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    Run {
-        code: out.status.code().expect("exited, not killed by a signal"),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Path of a real recording.
-fn real(name: &str) -> String {
-    let path = format!("{REAL}{name}");
-    assert!(PathBuf::from(&path).is_file(), "missing test data {path}");
-    path
-}
-
-/// Writes `text` to a fresh file in Cargo's scratch directory.
-fn temp_file(name: &str, text: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::write(&path, text).expect("scratch file written");
-    path.display().to_string()
-}
-
-/// The `x,y,z` rows of a header-less CSV, as numbers.
-fn read_rows(path: &str) -> Vec<[f64; 3]> {
-    std::fs::read_to_string(path)
-        .expect("readable")
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l
-                .split(',')
-                .map(|f| f.trim().parse().expect("number"))
-                .collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
 
 /// The ICM-20948 recording: its path and rows (integer counts).
 fn icm() -> (String, Vec<[f64; 3]>) {
     let path = real("icm20948_mag_300.csv");
-    let rows = read_rows(&path);
+    let rows = read_xyz(&path);
     assert_eq!(rows.len(), 300);
     (path, rows)
 }
@@ -392,14 +317,15 @@ fn columns_by_field_number_in_every_subcommand() {
             })
             .collect()
     };
-    let file9 = temp_file("wide9.csv", &nine(&rows));
-    let file18 = temp_file("wide18.csv", &eighteen(&rows));
-    magcal(&["fit", &file9]).refused_with(
+    let file9 = temp_file("wide9.csv", nine(&rows));
+    let file18 = temp_file("wide18.csv", eighteen(&rows));
+    magcal(&["fit", &file9]).fails_with(
+        2,
         "9 numeric columns and no header line to choose the magnetometer's x, y, z from; \
          add a header naming the columns and pass --columns X,Y,Z, or pass their field \
          numbers (from 1), e.g. --columns 7,8,9",
     );
-    magcal(&["fit", &file18]).refused_with("e.g. --columns 16,17,18");
+    magcal(&["fit", &file18]).fails_with(2, "e.g. --columns 16,17,18");
 
     for (file, fields) in [(&file9, "7,8,9"), (&file18, "16,17,18")] {
         let run = magcal(&["fit", file, "--columns", fields, "--format", "json"]);
@@ -464,9 +390,9 @@ fn columns_by_field_number_in_every_subcommand() {
 
     // planar: a turn about one axis, as 9 fields per row.
     let planar = real("planar_243.txt");
-    let turns = read_rows(&planar);
+    let turns = read_xyz(&planar);
     let plain = magcal(&["planar", &planar, "--format", "json"]).json();
-    let file = temp_file("planar9.csv", &nine(&turns));
+    let file = temp_file("planar9.csv", nine(&turns));
     let wide = magcal(&["planar", &file, "--columns", "7,8,9", "--format", "json"]).json();
     for key in ["axis", "centre", "matrix", "samples_used"] {
         assert_eq!(plain[key], wide[key], "{key}");
@@ -505,7 +431,7 @@ fn labelled_lines_in_every_subcommand() {
     );
 
     let planar = real("planar_243.txt");
-    let turns: String = read_rows(&planar)
+    let turns: String = read_xyz(&planar)
         .iter()
         .map(|[x, y, z]| format!("mx={x} my={y} mz={z}\n"))
         .collect();
@@ -536,8 +462,10 @@ fn labelled_lines_in_every_subcommand() {
     );
     let accel = magcal(&["fit", &file, "--columns", "accelx,accely,accelz"]);
     assert_eq!(accel.code, 3, "{}", accel.stderr);
-    magcal(&["fit", &file, "--columns", "hx,hy,hz"])
-        .refused_with("no line holds values named 'hx', 'hy', 'hz' (line 1 has: Accel X (m/s^2),");
+    magcal(&["fit", &file, "--columns", "hx,hy,hz"]).fails_with(
+        2,
+        "no line holds values named 'hx', 'hy', 'hz' (line 1 has: Accel X (m/s^2),",
+    );
 }
 
 /// Labels that do not say which reading is the magnetometer's are refused
@@ -552,7 +480,8 @@ fn ambiguous_labelled_logs_are_refused() {
         .collect();
     let file = temp_file("ambiguous_none.txt", &text);
     for format in ["text", "json"] {
-        magcal(&["fit", &file, "--format", format]).refused_with(
+        magcal(&["fit", &file, "--format", format]).fails_with(
+            2,
             "labelled values, but none is the magnetometer's by its label (Mag, M, mx, ...) \
              or unit (uT, gauss, mG): found A X, A Y, A Z; B X, B Y, B Z; pass --columns with \
              the three labels to use (e.g. --columns ax,ay,az) or their numbers in the line \
@@ -571,7 +500,8 @@ fn ambiguous_labelled_logs_are_refused() {
         .map(|[x, y, z]| format!("Mag X: {x} Y: {y} Z: {z} uT\tmx={x} my={y} mz={z}\n"))
         .collect();
     let file = temp_file("ambiguous_two.txt", &text);
-    magcal(&["fit", &file]).refused_with(
+    magcal(&["fit", &file]).fails_with(
+        2,
         "labelled values with 2 magnetometer readings: Mag X, Mag Y, Mag Z (uT); mx, my, \
          mz; pass --columns with the labels of the one to use",
     );
@@ -579,7 +509,7 @@ fn ambiguous_labelled_logs_are_refused() {
         "ambiguous.cal.json",
         &magcal(&["fit", &path, "--format", "json"]).stdout,
     );
-    magcal(&["apply", &cal, &file]).refused_with("2 magnetometer readings");
+    magcal(&["apply", &cal, &file]).fails_with(2, "2 magnetometer readings");
 }
 
 /// MotionCal `Raw:` lines (magnetometer at 10 per uT) are read as before:
