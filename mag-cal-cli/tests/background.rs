@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{magcal, real, temp_file, vec3};
+use common::{magcal, read_xyz, real, temp_file, vec3};
 use serde_json::Value;
 
 /// Agreement asked of the background calibrator's final calibration with
@@ -334,17 +334,9 @@ fn warnings_name_their_figures() {
 #[test]
 fn labelled_lines_are_named_and_calibrate_as_the_plain_file() {
     let path = real("icm20948_mag_300.csv");
-    let text = std::fs::read_to_string(&path).expect("readable");
-    let lines: String = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l
-                .split(',')
-                .map(|f| f.trim().parse().expect("number"))
-                .collect();
-            format!("Mag X: {} Y: {} Z: {} uT\n", v[0], v[1], v[2])
-        })
+    let lines: String = read_xyz(&path)
+        .iter()
+        .map(|v| format!("Mag X: {} Y: {} Z: {} uT\n", v[0], v[1], v[2]))
         .collect();
     let file = temp_file("background_labelled.txt", &lines);
     let columns = "Mag X (uT),Mag Y (uT),Mag Z (uT) (labelled values)";
