@@ -2,8 +2,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::linalg::{from_rows, rows, sym_sqrt};
-use crate::normalize::Normalization;
+use crate::numerics::linalg::{from_rows, rows, sym_sqrt};
+use crate::steps::normalize::Normalization;
 use crate::{Error, Real, Sample};
 
 /// A magnetometer calibration: `u = W (y - b)` lies on the unit sphere.

@@ -140,14 +140,14 @@ pub enum Error {
     /// Stored calibration bytes fail their checksum.
     ChecksumMismatch,
     /// An offsets-only fit: the readings' directions cover too small a cap
-    /// to determine the offsets ([`crate::offsets`]).
+    /// to determine the offsets ([`crate::device::offsets`]).
     OffsetsUndetermined {
         /// Smallest over largest eigenvalue of the normal matrix.
         determinacy: Figure,
         /// The limit it is below.
         limit: Figure,
     },
-    /// A planar fit ([`crate::planar`]): the samples do not lie near one
+    /// A planar fit ([`crate::device::planar`]): the samples do not lie near one
     /// plane; the device turned about more than one axis.
     NotPlanar {
         /// Smallest over largest eigenvalue of the samples' covariance.
@@ -567,7 +567,7 @@ mod tests {
     use std::vec::Vec;
 
     use super::*;
-    use crate::quality::{self, Thresholds};
+    use crate::judge::quality::{self, Thresholds};
 
     /// The figure and the limit an error was decided by, when it has them;
     /// an exhaustive match, so that a new variant does not compile here
@@ -735,8 +735,8 @@ mod tests {
                 limit: f(th.refuse_fit_error),
             },
         ];
-        let planar = crate::planar::PlanarThresholds::DEFAULT;
-        let determinacy = crate::offsets::REFUSE_DETERMINACY as f32;
+        let planar = crate::device::planar::PlanarThresholds::DEFAULT;
+        let determinacy = crate::device::offsets::REFUSE_DETERMINACY as f32;
         for (limit, sign) in [
             (th.refuse_flatness, -1.0),
             (th.refuse_quadric_gap, -1.0),

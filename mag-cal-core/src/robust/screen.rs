@@ -38,14 +38,14 @@
 //! Every pass is a cheap histogram pass (10-25 instructions a sample on a
 //! Cortex-M4F); nothing is sorted or stored per sample.
 
-use crate::collector::CentreFit;
-use crate::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
-use crate::linalg::{larger, smaller};
-use crate::normalize::{Normalization, Scan};
-use crate::rules::{
+use crate::device::collector::CentreFit;
+use crate::numerics::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
+use crate::numerics::linalg::{larger, smaller};
+use crate::sample::Sample;
+use crate::steps::normalize::{Normalization, Scan};
+use crate::steps::rules::{
     check, count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE,
 };
-use crate::sample::Sample;
 use crate::{Error, Real};
 
 /// Samples farther from the median centre than this many median distances
@@ -92,7 +92,7 @@ pub const RECENTRE_MORE_ROWS: u32 = 16;
 /// The median centre's histograms (with the candidate clip levels), the
 /// median distance, the shell band and the crude start, and the robust LS
 /// refits before the last one (which also find the runs of rejected rows,
-/// [`crate::runs`]), run on a fixed subsample of about this many rows
+/// [`crate::robust::runs`]), run on a fixed subsample of about this many rows
 /// (every `k`-th row, `k` at least 1). A quantile or the set of outliers
 /// is settled as well on a few hundred rows as on all of them, at a
 /// fraction of the passes' cost. The bounds of the first median-centre
@@ -248,7 +248,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     let inv_spread = T::one() / spread;
     let every = stride(scan.used);
     let mut dist = LogHistogram::new();
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         distances(block, prev, &gate, centre, inv_spread, every, &mut dist);
     }
     passes += 1;
@@ -363,7 +363,7 @@ fn shell<T: Real, S: Sample>(
     };
     let inv_m = T::one() / m;
     let mut h = LogHistogram::new();
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         shell_residuals(block, prev, &inside, centre, inv_m, every, &mut h);
     }
     Shell {
@@ -379,7 +379,7 @@ fn shell<T: Real, S: Sample>(
 /// The algebraic sphere fit's centre and its median distance, or `None`
 /// when it has none; and the passes it took (two, subsampled).
 ///
-/// Kasa's fit (the collector's running centre, [`crate::collector`]) over
+/// Kasa's fit (the collector's running centre, [`crate::device::collector`]) over
 /// the subsampled rows within [`RECENTRE_RADIUS`]` m` of the median centre
 /// `c`, in units of `m` about `c` (so that `f32` suffices whatever the
 /// offset): exact for samples on any part of a sphere, however unevenly
@@ -398,7 +398,7 @@ fn recentre<T: Real, S: Sample>(
     let inv_m = T::one() / m;
     let mut fit = CentreFit::EMPTY;
     let limit_sq = RECENTRE_RADIUS * RECENTRE_RADIUS;
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         kasa_rows(block, prev, gate, c, inv_m, limit_sq, every, &mut fit);
     }
     let a = fit.centre();
@@ -411,7 +411,7 @@ fn recentre<T: Real, S: Sample>(
         c[2] + T::from_single(a[2]) * m,
     ];
     let mut dist = LogHistogram::new();
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         distances(block, prev, gate, centre, inv_m, every, &mut dist);
     }
     let r = dist
@@ -456,7 +456,7 @@ fn kasa_rows<T: Real, S: Sample>(
 
 /// The coordinate-wise median of the rows the scan's rules keep, the mean
 /// of the axes' inter-quartile ranges, the rules with the clip levels found
-/// in the first pass (rows at the scan's extremes, [`crate::rules::CLIP_SHARE`]),
+/// in the first pass (rows at the scan's extremes, [`crate::steps::rules::CLIP_SHARE`]),
 /// and the passes it took.
 fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
     let rows = Gate {
@@ -468,7 +468,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     // an extreme that many rows share, so the subsample has it too).
     let every = stride(scan.used);
     let mut first = None;
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         bounds(block, prev, &rows, every, &mut first);
     }
     let (box_lo, box_hi) = first.unwrap_or(([T::zero(); 3], [T::zero(); 3]));
@@ -488,7 +488,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
         if passes == 0 {
             let mut at = [[0usize; 2]; 3];
             let mut sub_rows = 0;
-            for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+            for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
                 sub_rows += fill_first(
                     block,
                     prev,
@@ -507,7 +507,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
                 ..Rules::with_clip(levels)
             };
         } else {
-            for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+            for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
                 fill(block, prev, &gate, every, &mut h);
             }
         }
@@ -603,8 +603,8 @@ fn fill_first<T: Real, S: Sample>(
 }
 
 /// The candidate clip levels: an axis's extreme value that at least
-/// [`crate::rules::CLIP_SHARE`] of the `used` rows of the subsample (and
-/// [`crate::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
+/// [`crate::steps::rules::CLIP_SHARE`] of the `used` rows of the subsample (and
+/// [`crate::steps::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
 /// that hardly varies (planar data) is no clipping ([`confirm_levels`]
 /// counts them on every row).
 fn clip_levels<T: Real>(
@@ -679,7 +679,7 @@ fn interior_levels<T: Real, S: Sample>(
     // Boyer-Moore majority vote per bin: the value a majority of the bin's
     // rows share, if any (`confirm_levels` counts it).
     let mut votes = [[(T::zero(), 0u32); 2]; 3];
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         for (_, s, last) in every(block, prev, stride) {
             let Some(y) = gate.pass(s, last) else {
                 continue;
@@ -713,8 +713,8 @@ fn interior_levels<T: Real, S: Sample>(
 }
 
 /// Keeps the candidate clip levels (`levels`, `T::MAX` for none) that
-/// at least [`crate::rules::CLIP_SHARE`] of the `used` rows `gate`
-/// passes (and [`crate::rules::CLIP_MIN_ROWS`]) share exactly, but not
+/// at least [`crate::steps::rules::CLIP_SHARE`] of the `used` rows `gate`
+/// passes (and [`crate::steps::rules::CLIP_MIN_ROWS`]) share exactly, but not
 /// most of them: one pass over every row, only when there is a
 /// candidate. Returns the passes taken. The candidates come from a
 /// subsample, whose counts are too few to decide: on a real recording
@@ -731,7 +731,7 @@ fn confirm_levels<T: Real, S: Sample>(
         return 0;
     }
     let mut shared = [[0usize; 2]; 3];
-    for (prev, block) in pieces(samples, crate::moments::BLOCK) {
+    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
         for y in gate.rows(block, prev) {
             for ((n, l), v) in shared.iter_mut().zip(levels.iter()).zip(y) {
                 n[0] += usize::from(v == l[0]);
@@ -748,8 +748,8 @@ fn confirm_levels<T: Real, S: Sample>(
 }
 
 /// The rows a clip level needs of `rows` rows:
-/// [`crate::rules::CLIP_SHARE`] of them, and at least
-/// [`crate::rules::CLIP_MIN_ROWS`] (in integers: no soft-float `f64` on
+/// [`crate::steps::rules::CLIP_SHARE`] of them, and at least
+/// [`crate::steps::rules::CLIP_MIN_ROWS`] (in integers: no soft-float `f64` on
 /// the target).
 fn clip_rows(rows: usize) -> usize {
     const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
@@ -839,7 +839,7 @@ fn shell_residuals<T: Real, S: Sample>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::normalize::scan;
+    use crate::steps::normalize::scan;
 
     /// A sphere of 1000 integer rows, and every other row beyond `x = 470`
     /// (320 counts from the centre; a tenth of the rows lie beyond) clipped
@@ -854,7 +854,7 @@ mod tests {
             [v[0] + 150, v[1] - 80, v[2] + 20]
         });
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let clean = screen(&rows, &s, crate::quality::REFUSE_FIT_ERROR as f32).unwrap();
+        let clean = screen(&rows, &s, crate::judge::quality::REFUSE_FIT_ERROR as f32).unwrap();
         assert_eq!(clean.drops.clipped, 0);
         let mut clipped = 0;
         let mut beyond = 0;
@@ -867,7 +867,7 @@ mod tests {
         }
         assert!(clipped > 40, "{clipped}");
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let dirty = screen(&rows, &s, crate::quality::REFUSE_FIT_ERROR as f32).unwrap();
+        let dirty = screen(&rows, &s, crate::judge::quality::REFUSE_FIT_ERROR as f32).unwrap();
         assert_eq!(dirty.rules.clip[0][1], 470.0);
         // The clipped rows, and the clean rows that were at 470 already.
         let at = rows.iter().filter(|r| r[0] == 470).count();

@@ -247,7 +247,7 @@
 //! assert_eq!((p.samples, p.ready), (1, false));
 //! ```
 
-use crate::linalg::dot;
+use crate::numerics::linalg::dot;
 use crate::sample::Sample;
 
 /// Default minimum angle between consecutive kept samples, degrees (see the

@@ -53,13 +53,13 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::histogram::LogHistogram;
-use crate::linalg::{
+use crate::numerics::histogram::LogHistogram;
+use crate::numerics::linalg::{
     cholesky, cholesky_solve, columns_of, from_columns, inverse3, min_max, sym_eigenvalues,
 };
-use crate::methods::{robust_sigma, OUTLIER_CUT};
-use crate::rules::{check, Rules};
 use crate::sample::Sample;
+use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::rules::{check, Rules};
 use crate::{Calibration, Error, Figure, Real};
 
 /// Cap on the Gauss-Newton iterations (each one pass over the samples).
@@ -318,10 +318,10 @@ impl<T: Real> State<T> {
                 PassKind::Residuals => {}
             }
         }
-        if used < crate::normalize::MIN_SAMPLES {
+        if used < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: used,
-                required: crate::normalize::MIN_SAMPLES,
+                required: crate::steps::normalize::MIN_SAMPLES,
             });
         }
         let sigma = robust_sigma(&hist);

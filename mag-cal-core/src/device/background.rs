@@ -16,7 +16,7 @@
 //! the current calibration (its fit error on the buffer), the LS9 moments
 //! of the rows within [`crate::OUTLIER_CUT`] robust standard deviations,
 //! two artificial-data passes with the cut of the pass before, a final pass
-//! for the quality figures, and the judging of [`crate::quality`]. A new
+//! for the quality figures, and the judging of [`crate::judge::quality`]. A new
 //! calibration is adopted only when every check passes and its robust fit
 //! error on the buffer is below the current calibration's.
 //!
@@ -27,7 +27,7 @@
 //! [`BackgroundConfig::stale_rms`] for [`BackgroundConfig::stale_readings`]
 //! readings, the calibration is stale ([`Background::is_stale`]): a
 //! persistent rise, not a burst. The
-//! offsets alone are then fitted ([`crate::offsets`], strength unchanged)
+//! offsets alone are then fitted ([`crate::device::offsets`], strength unchanged)
 //! to the recent readings; a moved hard iron fits a sphere of the known
 //! radius with a small residual and is adopted at once, while a magnet
 //! passing by does not and is not. After a new hard iron, the buffered
@@ -55,21 +55,22 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::artificial::{Pass, PassSums, Residuals};
-use crate::collector::{self, CentreFit};
-use crate::ellipsoid::{self, Ellipsoid};
-use crate::linalg::{dot, larger, sym_inv_sqrt};
-use crate::methods::{adc2, robust_sigma, OUTLIER_CUT};
-use crate::moments::{Cut, Moments};
-use crate::normalize::{Normalization, Projector, MIN_SAMPLES};
-use crate::offsets::{refit_offsets, Strength};
-use crate::quality::{self, DirectionSums, Figures, FinalPass, FinalSums};
-use crate::rules::{check, Drops, Gate, Rules};
-use crate::runs::Runs;
+use crate::device::collector::{self, CentreFit};
+use crate::device::offsets::{refit_offsets, Strength};
+use crate::judge::quality::{self, Figures};
+use crate::numerics::linalg::{dot, larger, sym_inv_sqrt};
+use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::artificial::{Pass, PassSums, Residuals};
+use crate::steps::ellipsoid::{self, Ellipsoid};
+use crate::steps::final_pass::{DirectionSums, FinalPass, FinalSums};
+use crate::steps::methods::{adc2, robust_sigma, OUTLIER_CUT};
+use crate::steps::moments::{Cut, Moments};
+use crate::steps::normalize::{Normalization, Projector, MIN_SAMPLES};
+use crate::steps::rules::{check, Drops, Gate, Rules};
 use crate::{Calibration, Error, Quality, Real, Thresholds, Warnings};
 
-/// Direction cells of the buffer (those of [`crate::collector`]).
+/// Direction cells of the buffer (those of [`crate::device::collector`]).
 pub const CELLS: usize = collector::CELLS;
 
 /// Recent readings kept for an offsets-only fit.
@@ -118,7 +119,7 @@ pub const WILD_RESIDUAL: f64 = 1.0;
 pub struct BackgroundConfig {
     /// A reading is buffered only when its direction differs from the last
     /// buffered one by at least this angle, degrees (as
-    /// [`crate::collector`]).
+    /// [`crate::device::collector`]).
     pub min_angle_deg: f32,
     /// New buffered samples since the last refit before the next one.
     pub refit_after: usize,
@@ -888,7 +889,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                     Ok(f) => f,
                     Err(e) => return self.refused(e),
                 };
-                let (ls, quadric_gap) = crate::ls_step(&moments, ellipsoid::ls9);
+                let (ls, quadric_gap) = crate::pipeline::ls_step(&moments, ellipsoid::ls9);
                 let ls: Ellipsoid<T> = match ls {
                     Ok(ls) => ls,
                     Err(e) => {

@@ -22,7 +22,7 @@
 
 use nalgebra::SVector;
 
-use crate::linalg::dot;
+use crate::numerics::linalg::dot;
 use crate::{Error, Real};
 
 /// A smooth objective over `N` parameters.

@@ -7,11 +7,11 @@
 
 use nalgebra::SMatrix;
 
-use crate::histogram::LogHistogram;
-use crate::normalize::{Normalization, Projector};
-use crate::rules::{check, every, Gate, Rules};
-use crate::runs::{RunFinder, Runs};
+use crate::numerics::histogram::LogHistogram;
+use crate::robust::runs::{RunFinder, Runs};
 use crate::sample::Sample;
+use crate::steps::normalize::{Normalization, Projector};
+use crate::steps::rules::{check, every, Gate, Rules};
 use crate::Real;
 
 /// Number of monomials `x^p y^q z^r` with `p + q + r <= 4`.
@@ -139,7 +139,7 @@ impl<T: Real> Moments<T> {
 
     /// [`Moments::accumulate_every`] outside the spans of `skip` that, with
     /// `runs`, also finds the runs of rows whose residual is beyond the
-    /// threshold given with them and writes them there ([`crate::runs`]).
+    /// threshold given with them and writes them there ([`crate::robust::runs`]).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn accumulate_finding<S: Sample>(
         samples: &[S],

@@ -55,20 +55,20 @@
 //! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 
-use crate::heading::{atan2_deg, wrap_deg};
-use crate::histogram::LogHistogram;
-use crate::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
-use crate::methods::{robust_sigma, OUTLIER_CUT};
-use crate::normalize::{scan, MIN_SAMPLES};
-use crate::rules::{pieces, Drops, Gate};
+use crate::device::heading::{atan2_deg, wrap_deg};
+use crate::numerics::histogram::LogHistogram;
+use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
+use crate::robust::screen::screen;
 use crate::sample::Sample;
-use crate::screen::screen;
+use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::normalize::{scan, MIN_SAMPLES};
+use crate::steps::rules::{pieces, Drops, Gate};
 use crate::{Error, Figure, Real, CLEAN_LIMIT};
 
 /// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
 /// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
 /// real recording `planar_243.txt` 0.010; a +-30 deg band gives 0.18 and
-/// the full sphere 0.3-1. Between [`crate::quality::REFUSE_FLATNESS`] and
+/// the full sphere 0.3-1. Between [`crate::judge::quality::REFUSE_FLATNESS`] and
 /// this, both the planar and the three-dimensional fit may run.
 pub const REFUSE_NOT_PLANAR: f64 = 0.06;
 
@@ -101,12 +101,12 @@ pub struct PlanarThresholds {
 }
 
 impl PlanarThresholds {
-    /// The measured constants of this module and of [`crate::quality`].
+    /// The measured constants of this module and of [`crate::judge::quality`].
     pub const DEFAULT: Self = Self {
         refuse_not_planar: REFUSE_NOT_PLANAR as f32,
-        refuse_fit_error: crate::quality::REFUSE_FIT_ERROR as f32,
+        refuse_fit_error: crate::judge::quality::REFUSE_FIT_ERROR as f32,
         min_sectors: MIN_SECTORS,
-        refuse_outlier_share: crate::quality::REFUSE_OUTLIER_SHARE as f32,
+        refuse_outlier_share: crate::judge::quality::REFUSE_OUTLIER_SHARE as f32,
     };
 }
 
@@ -122,7 +122,7 @@ impl Default for PlanarThresholds {
 pub struct PlanarConfig {
     /// The sensor axis that points (roughly) up while the device turns,
     /// e.g. `[0, 0, -1]` for a sensor whose z axis points down (the
-    /// default, the convention of [`crate::heading`]). It sets the sign of
+    /// default, the convention of [`crate::device::heading`]). It sets the sign of
     /// the turn axis, and with it the sense of the heading: clockwise seen
     /// from above is positive.
     pub up: [f64; 3],
@@ -553,7 +553,7 @@ impl<T: Real, S: Sample> Rows<'_, T, S> {
     #[inline(always)]
     fn each(&self, mut f: impl FnMut([T; 3])) {
         let (c, k) = (self.centre, self.inv_scale);
-        for (prev, block) in pieces(self.samples, crate::moments::BLOCK) {
+        for (prev, block) in pieces(self.samples, crate::steps::moments::BLOCK) {
             for y in self.gate.rows(block, prev) {
                 f([(y[0] - c[0]) * k, (y[1] - c[1]) * k, (y[2] - c[2]) * k]);
             }

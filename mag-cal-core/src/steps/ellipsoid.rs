@@ -3,7 +3,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-use crate::linalg::{
+use crate::numerics::linalg::{
     cholesky, cholesky_in_place, cholesky_solve, columns_of, from_columns, min_max, solve3,
     solve_lower, solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt,
 };

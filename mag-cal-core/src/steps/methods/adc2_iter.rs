@@ -10,7 +10,7 @@
 //! passes on a full sphere, 70-90 on a +-30 deg band), so the map
 //! `x -> ADC2 step`, with `x` the 6 upper entries of the symmetric `W'` and
 //! `b'` (normalised units), is accelerated by Anderson mixing with memory 5
-//! and mixing 1.8 ([`crate::quasi_newton::Anderson`], [`MIXING`]). It stops on the gauge-free change of
+//! and mixing 1.8 ([`crate::numerics::quasi_newton::Anderson`], [`MIXING`]). It stops on the gauge-free change of
 //! a plain step, `max|dM'| rho'^2 + max|db'| / rho' < tol` (`1e-6` in `f64`,
 //! `1e-5` in `f32`; [`crate::Config::pass_tolerance`]), and returns that
 //! step's image. Measured on the design document's scenarios A-G (50 runs
@@ -20,12 +20,12 @@
 
 use nalgebra::{Matrix3, SVector, Vector3};
 
-use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, cholesky_inverse, columns_of, from_columns, sym_inv_sqrt};
-use crate::methods::{adc2, weighted_stats, Estimate, Weights};
-use crate::normalize::Normalization;
-use crate::quasi_newton::Anderson;
+use crate::numerics::linalg::{cholesky, cholesky_inverse, columns_of, from_columns, sym_inv_sqrt};
+use crate::numerics::quasi_newton::Anderson;
 use crate::sample::Sample;
+use crate::steps::ellipsoid::Ellipsoid;
+use crate::steps::methods::{adc2, weighted_stats, Estimate, Weights};
+use crate::steps::normalize::Normalization;
 use crate::{Config, Error, Real, Warning, Warnings};
 
 /// Dimension of the fixed-point state: `W'` (6) and `b'` (3).

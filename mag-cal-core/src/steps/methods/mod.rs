@@ -1,18 +1,18 @@
 //! Step 4 of Algorithm 1: the re-estimation methods, each a small objective
-//! over the shared [`crate::quasi_newton`] solver.
+//! over the shared [`crate::numerics::quasi_newton`] solver.
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::artificial::{Pass, Residuals, Stats};
-use crate::ellipsoid::Ellipsoid;
-use crate::histogram::LogHistogram;
-use crate::linalg::larger;
-use crate::normalize::Normalization;
-use crate::quality::DirectionSums;
-use crate::rules::Gate;
-use crate::runs::Runs;
+use crate::numerics::histogram::LogHistogram;
+use crate::numerics::linalg::larger;
+use crate::robust::runs::Runs;
+use crate::robust::screen::MAD_TO_SIGMA;
 use crate::sample::Sample;
-use crate::screen::MAD_TO_SIGMA;
+use crate::steps::artificial::{Pass, Residuals, Stats};
+use crate::steps::ellipsoid::Ellipsoid;
+use crate::steps::final_pass::DirectionSums;
+use crate::steps::normalize::Normalization;
+use crate::steps::rules::Gate;
 use crate::{Config, Error, Real, Warnings};
 
 #[cfg(feature = "adc1")]
@@ -73,7 +73,7 @@ impl Method {
     /// Whether the method fits the radial residual `|u| - 1` (ADC1, ADC2,
     /// iterated ADC2): its residuals then average to zero in every region
     /// of directions at a good fit, and the lack-of-fit figure judges it
-    /// ([`crate::quality::REFUSE_LACK_OF_FIT`]).
+    /// ([`crate::judge::quality::REFUSE_LACK_OF_FIT`]).
     pub const fn fits_radial_residual(self) -> bool {
         matches!(self, Method::Adc1 | Method::Adc2 | Method::Adc2Iterated)
     }
@@ -141,7 +141,7 @@ pub(crate) fn ls_only<T: Real, S: Sample>(
 pub(crate) struct Weights<'r, T: Real> {
     pub gate: Gate<T>,
     /// The spans of rows beside runs of rejected rows, skipped
-    /// ([`crate::runs`]). By reference: the weights are copied in the
+    /// ([`crate::robust::runs`]). By reference: the weights are copied in the
     /// methods' frames, which are the deepest of the robust path.
     pub runs: &'r Runs,
     /// Robust standard deviation of the radial residuals under the start

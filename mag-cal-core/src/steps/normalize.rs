@@ -7,8 +7,8 @@
 
 use nalgebra::Vector3;
 
-use crate::rules::{count_drops, Drops, Filter, Finite, Gate, Rules};
 use crate::sample::Sample;
+use crate::steps::rules::{count_drops, Drops, Filter, Finite, Gate, Rules};
 use crate::{Error, Real};
 
 /// Minimum number of finite samples for any fit: the LS ellipsoid has nine
@@ -65,7 +65,7 @@ pub(crate) struct Scan<T: Real> {
 pub(crate) const GROSS_KURTOSIS: f64 = 3.0;
 
 /// One pass over the samples: applies the drop rules (the glitch rules
-/// when `glitches` is set, see [`crate::rules`]), counts, validates and
+/// when `glitches` is set, see [`crate::steps::rules`]), counts, validates and
 /// normalises the rows kept.
 ///
 /// Sums are taken on `y - y0`, with `y0` the first kept sample, so the

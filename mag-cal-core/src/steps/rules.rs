@@ -25,7 +25,7 @@
 //! re-applies the rules to the read-only samples (a few instructions a
 //! sample), and the repetition rule reads the row before.
 
-use crate::runs::Runs;
+use crate::robust::runs::Runs;
 use crate::sample::Sample;
 use crate::Real;
 
@@ -305,7 +305,7 @@ impl<T: Real> Gate<T> {
 pub(crate) trait Filter<T: Real> {
     /// A gated pass (rules to apply, or the robust path's screening): the
     /// final pass also sums the cubes of the residuals, which only the
-    /// robust path reports ([`crate::quality::Quality::skewness`]); the
+    /// robust path reports ([`crate::judge::quality::Quality::skewness`]); the
     /// loop over every finite row of clean data does not pay for them.
     const ROBUST: bool = false;
 
@@ -359,7 +359,7 @@ pub enum SampleClass {
     /// The row lies too far from the others (screening).
     Screened,
     /// The row's radial residual under the calibration exceeds the cut,
-    /// or the row lies beside a run of such rows ([`crate::runs`]).
+    /// or the row lies beside a run of such rows ([`crate::robust::runs`]).
     Rejected,
 }
 
@@ -380,7 +380,7 @@ pub struct Selection<T: Real> {
     /// this were rejected.
     pub residual_limit: Option<T>,
     /// Rows in these spans, beside runs of rejected rows, were rejected
-    /// too ([`crate::runs`]).
+    /// too ([`crate::robust::runs`]).
     pub runs: Runs,
 }
 

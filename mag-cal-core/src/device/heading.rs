@@ -5,7 +5,7 @@
 //! as NED); the heading is the angle from magnetic north to the body's x
 //! axis, positive towards east, in degrees in `(-180, 180]`. The field
 //! passed in is a calibrated reading (and, where the sensor axes are not the
-//! body axes, aligned: [`crate::align`]); its scale does not matter.
+//! body axes, aligned: [`crate::device::align`]); its scale does not matter.
 //!
 //! ```
 //! use mag_cal_core::heading::{heading_deg, HeadingSmoother, DEFAULT_WINDOW};

@@ -4,13 +4,13 @@
 //! The plain LS fit trusts every sample, and an M-estimator started from it
 //! settles on the ellipsoid that a displaced patch of the trajectory bent
 //! it to. The robust fit starts instead from the crude sphere of the
-//! screening ([`crate::screen`]):
+//! screening ([`crate::robust::screen`]):
 //!
-//! 1. LS9 moments over the [`crate::screen::CRUDE_SHARE`] of the screened
+//! 1. LS9 moments over the [`crate::robust::screen::CRUDE_SHARE`] of the screened
 //!    samples closest to the crude sphere (median centre, median distance);
 //! 2. weighted LS refits on the moments, weight 1 when the algebraic
 //!    residual `|e| = ||u|^2 - 1| / 2` under the previous fit is at most
-//!    [`crate::methods::OUTLIER_CUT`]` sigma_e`, with
+//!    [`crate::steps::methods::OUTLIER_CUT`]` sigma_e`, with
 //!    `sigma_e = 1.4826 median|e|` from the pass before (lagged one pass,
 //!    so each refit is one pass). On the subsample (below), for
 //!    [`TRIM_REFITS`] refits, the cut is also at most the [`TRIM_SHARE`]
@@ -27,10 +27,10 @@
 //!    subsample a few more refits before its count settles).
 //!
 //! The crude start and the refits run on a fixed subsample of about
-//! [`crate::screen::SUBSAMPLE_ROWS`] rows until its count of rows kept
+//! [`crate::robust::screen::SUBSAMPLE_ROWS`] rows until its count of rows kept
 //! settles (changes by at most one). From the crude start, the untrimmed
 //! refits on the subsample also find the runs of rows far beyond the cut
-//! ([`crate::runs`]; six consecutive rows of the subsample), those of the
+//! ([`crate::robust::runs`]; six consecutive rows of the subsample), those of the
 //! last one stand, and one refit on every row follows, which skips the
 //! rows beside them, as every later pass does. Measured on a Cortex-M4F
 //! (LS9 + ADC2, n = 1000, a tenth of the rows displaced): 1.56 M
@@ -51,7 +51,7 @@
 //! refits: from the subsample's fit alone, a recording of level turns (the
 //! heading scenario of the paper tables) was refused as a systematic
 //! misfit. Without a subsample (fewer than twice
-//! [`crate::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`] passes run on
+//! [`crate::robust::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`] passes run on
 //! every row until the count repeats, the third finding the runs and
 //! refitting nothing (a limit of zero keeps no row).
 //!
@@ -69,16 +69,16 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::ellipsoid::{fit_with, Ellipsoid, Solve};
-use crate::histogram::LogHistogram;
-use crate::linalg::smaller;
-use crate::methods::{robust_sigma, OUTLIER_CUT};
-use crate::moments::{Cut, Moments};
-use crate::normalize::{Normalization, Projector};
-use crate::rules::Gate;
-use crate::runs::Runs;
+use crate::numerics::histogram::LogHistogram;
+use crate::numerics::linalg::smaller;
+use crate::robust::runs::Runs;
+use crate::robust::screen::{stride, Screening};
 use crate::sample::Sample;
-use crate::screen::{stride, Screening};
+use crate::steps::ellipsoid::{fit_with, Ellipsoid, Solve};
+use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::moments::{Cut, Moments};
+use crate::steps::normalize::{Normalization, Projector};
+use crate::steps::rules::Gate;
 use crate::{Error, Real};
 
 /// Cap on the weighted LS refits after the crude start.
@@ -149,8 +149,8 @@ struct Spread<T: Real> {
 /// One weighted LS refit pass: the moments of the rows whose algebraic
 /// residual under `ls` is within `limit` (with `sums`; without, none),
 /// what the residuals under `ls` measure (for the next pass), and into
-/// `runs`, when given, the runs of rows beyond [`crate::runs::STRONG`]
-/// times the limit ([`crate::runs`]). Out of line: its histogram takes
+/// `runs`, when given, the runs of rows beyond [`crate::robust::runs::STRONG`]
+/// times the limit ([`crate::robust::runs`]). Out of line: its histogram takes
 /// stack only during the pass.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
@@ -167,7 +167,7 @@ fn weighted_moments<T: Real, S: Sample>(
 ) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
-    let find = runs.map(|r| (r, limit * T::lit(crate::runs::STRONG)));
+    let find = runs.map(|r| (r, limit * T::lit(crate::robust::runs::STRONG)));
     let cut = Cut {
         map: Projector::new(norm, &ls.centre, &ls.w),
         // A limit of zero keeps no row: no moments to sum.
@@ -191,7 +191,7 @@ fn weighted_moments<T: Real, S: Sample>(
 
 /// The moments of the crude start: the rows `gate` passes (the rules and
 /// the screening ball of `screening`) outside `window` within the band
-/// around the crude sphere that holds [`crate::screen::CRUDE_SHARE`] of
+/// around the crude sphere that holds [`crate::robust::screen::CRUDE_SHARE`] of
 /// them, in the screening's normalised coordinates. Out of line (stack, as
 /// [`robust_ls`]).
 #[inline(never)]
@@ -295,7 +295,7 @@ fn crude_cut<T: Real>(screening: &Screening<T>) -> Cut<T> {
 
 /// The robust LS fit from the crude start's moments `crude` (one pass
 /// already made), over the rows `gate` passes; writes into `runs` the
-/// spans beside runs of rejected rows ([`crate::runs`]), which the later
+/// spans beside runs of rejected rows ([`crate::robust::runs`]), which the later
 /// refits skip, as the method's passes will. The refits on the subsample
 /// skip the rows of `window` too, as the crude start did
 /// ([`window`]); those on every row take in the window's rows that fit.

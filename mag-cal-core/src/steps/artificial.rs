@@ -37,13 +37,13 @@
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
 
-use crate::histogram::LogHistogram;
-use crate::linalg::{columns_of, from_columns, inverse3, larger};
-use crate::moments::BLOCK;
-use crate::normalize::{Normalization, Projector};
-use crate::rules::{check, pieces, Gate, Rules};
-use crate::runs::Runs;
+use crate::numerics::histogram::LogHistogram;
+use crate::numerics::linalg::{columns_of, from_columns, inverse3, larger};
+use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::moments::BLOCK;
+use crate::steps::normalize::{Normalization, Projector};
+use crate::steps::rules::{check, pieces, Gate, Rules};
 use crate::{Error, Real};
 
 /// The shape of the algebraic residuals `e = |u|^2 - 1` of a plain pass
@@ -197,10 +197,10 @@ impl<T: Real> Stats<T> {
         let mut total = [T::zero(); SUMS];
         let map = Projector::new(norm, centre, w);
         let count = sums(samples, &map, weighted, &mut total);
-        if count < crate::normalize::MIN_SAMPLES {
+        if count < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
-                required: crate::normalize::MIN_SAMPLES,
+                required: crate::steps::normalize::MIN_SAMPLES,
             });
         }
         Self::from_sums(count, &total, w).ok_or(Error::NotAnEllipsoid)
@@ -267,7 +267,7 @@ fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
 const SUMS: usize = 24;
 
 /// The sums of a gated artificial-data pass taken over several pieces of
-/// the samples in turn (a pass in slices; [`crate::background`]).
+/// the samples in turn (a pass in slices; [`crate::device::background`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PassSums<T: Real> {
     count: usize,
@@ -304,10 +304,10 @@ impl<T: Real> PassSums<T> {
     /// # Errors
     /// As [`Stats::accumulate_with`].
     pub(crate) fn stats(&self, w: &Matrix3<T>) -> Result<Stats<T>, Error> {
-        if self.count < crate::normalize::MIN_SAMPLES {
+        if self.count < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: self.count,
-                required: crate::normalize::MIN_SAMPLES,
+                required: crate::steps::normalize::MIN_SAMPLES,
             });
         }
         Stats::from_sums(self.count, &self.total, w).ok_or(Error::NotAnEllipsoid)
@@ -319,7 +319,7 @@ impl<T: Real> PassSums<T> {
 pub(crate) struct Pass<'a, T: Real> {
     /// The drop rules and the screening ball.
     pub gate: &'a Gate<T>,
-    /// The spans of rows skipped ([`crate::runs`]).
+    /// The spans of rows skipped ([`crate::robust::runs`]).
     pub runs: &'a Runs,
     /// Rows with `||u| - 1|` above this are left out (none when `None`).
     pub limit: Option<T>,

@@ -7,7 +7,7 @@
 //! d^T H d   = 2 tr(Wn D G D^T)
 //! ```
 //!
-//! with the statistics of [`crate::artificial::Stats`]. `Sigma` is the
+//! with the statistics of [`crate::steps::artificial::Stats`]. `Sigma` is the
 //! user's ([`crate::Config::noise_covariance`]) or, as in the paper, the
 //! covariance of the LS residuals.
 //!
@@ -21,17 +21,17 @@
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, SVector};
 
-use crate::artificial::Stats;
-use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{
+use crate::numerics::linalg::{
     cholesky, cholesky_inverse, columns_of, from_columns, min_max, sym_eigenvalues, sym_inv_sqrt,
 };
-use crate::methods::adc2::{check_gram, options, split, theta, PARAMS};
-use crate::methods::{weighted_stats, Estimate, Weights};
-use crate::normalize::Normalization;
-use crate::quality::DirectionSums;
-use crate::quasi_newton::{bfgs, Minimum, Objective};
+use crate::numerics::quasi_newton::{bfgs, Minimum, Objective};
 use crate::sample::Sample;
+use crate::steps::artificial::Stats;
+use crate::steps::ellipsoid::Ellipsoid;
+use crate::steps::final_pass::DirectionSums;
+use crate::steps::methods::adc2::{check_gram, options, split, theta, PARAMS};
+use crate::steps::methods::{weighted_stats, Estimate, Weights};
+use crate::steps::normalize::Normalization;
 use crate::{Config, Error, Real, Warnings};
 
 /// The ADC1 objective in terms of the correction `Theta` to the start.

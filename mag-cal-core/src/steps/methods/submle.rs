@@ -27,15 +27,15 @@
 
 use nalgebra::{Matrix3, SVector, Vector3};
 
-use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, columns_of, from_columns, sym_sqrt};
-use crate::methods::{Estimate, Weights};
-use crate::moments::BLOCK;
-use crate::normalize::Normalization;
-use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
-use crate::rules::Gate;
-use crate::runs::Runs;
+use crate::numerics::linalg::{cholesky, columns_of, from_columns, sym_sqrt};
+use crate::numerics::quasi_newton::{bfgs, BfgsOptions, Objective};
+use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::ellipsoid::Ellipsoid;
+use crate::steps::methods::{Estimate, Weights};
+use crate::steps::moments::BLOCK;
+use crate::steps::normalize::Normalization;
+use crate::steps::rules::Gate;
 use crate::{Config, Error, Real, Warnings};
 
 /// Number of parameters: the upper triangle of `A` (6) and `b'` (3).

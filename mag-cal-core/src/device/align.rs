@@ -23,8 +23,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::linalg::{dot, from_rows, rows};
-use crate::moments::BLOCK;
+use crate::numerics::linalg::{dot, from_rows, rows};
+use crate::steps::moments::BLOCK;
 use crate::{Calibration, Error, Real, Sample};
 
 /// Sweep cap of the Jacobi SVD. A 3x3 converges quadratically, in 2-4

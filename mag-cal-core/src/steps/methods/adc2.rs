@@ -2,7 +2,7 @@
 //! artificial field vectors with the noise covariance ignored.
 //!
 //! With `Theta = [dT | beta]` (3x4), `z_i = [h_i; 1]`, the residual model
-//! `r_i ~ Theta z_i` and the statistics of [`crate::artificial::Stats`]:
+//! `r_i ~ Theta z_i` and the statistics of [`crate::steps::artificial::Stats`]:
 //!
 //! ```text
 //! J(Theta)    = J0 - 2 <Theta, Q> + <Theta G, Theta>,   Q = [S_rh | s_r],  G = [[S_hh, s_h], [s_h^T, n]]
@@ -18,14 +18,16 @@
 
 use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, SVector, Vector3};
 
-use crate::artificial::Stats;
-use crate::ellipsoid::Ellipsoid;
-use crate::linalg::{cholesky, cholesky_solve, columns_of, min_max, sym_eigenvalues, sym_inv_sqrt};
-use crate::methods::{weighted_stats, Estimate, Weights};
-use crate::normalize::Normalization;
-use crate::quality::DirectionSums;
-use crate::quasi_newton::{bfgs, BfgsOptions, Objective};
+use crate::numerics::linalg::{
+    cholesky, cholesky_solve, columns_of, min_max, sym_eigenvalues, sym_inv_sqrt,
+};
+use crate::numerics::quasi_newton::{bfgs, BfgsOptions, Objective};
 use crate::sample::Sample;
+use crate::steps::artificial::Stats;
+use crate::steps::ellipsoid::Ellipsoid;
+use crate::steps::final_pass::DirectionSums;
+use crate::steps::methods::{weighted_stats, Estimate, Weights};
+use crate::steps::normalize::Normalization;
 use crate::{Config, Error, Real, Warnings};
 
 /// Number of parameters: `dT` (9) and `beta` (3).

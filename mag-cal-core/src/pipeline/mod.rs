@@ -1,0 +1,110 @@
+//! The sequencing of the batch fit: the plain path, and the robust path
+//! when the plain fit is not clean. The steps themselves are in `steps`,
+//! the outlier handling in `robust`, the judging in `judge`.
+
+mod finish;
+mod plain;
+mod robust;
+
+use crate::judge::quality::{self, Figures};
+use crate::robust::{refit, runs, screen};
+use crate::steps::{ellipsoid, final_pass, methods, moments, normalize, rules};
+use crate::{Calibration, Config, Error, Fit, Method, Quality, Real, Report, Sample, Selection};
+
+use finish::{finish, judge_failure, method_step};
+use plain::plain_path;
+pub use plain::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SHAPE, CLEAN_SKEWNESS, CLEAN_TAIL};
+use robust::robust_path;
+pub use robust::{AMBIGUOUS_SCORE, DOUBT_LACK_OF_FIT};
+
+/// Calibrates from a slice of raw samples, in precision `T`.
+///
+/// Non-finite samples are skipped and counted. Passes over the data:
+/// validation and normalisation, moments, then (except [`Method::Ls`]) the
+/// method's own passes, and finally one pass for the quality figures. On
+/// contaminated data ([`Config::robust`](crate::Config::robust)), screening and robust LS passes
+/// come before the method's (see [the crate docs](crate#outliers)). The
+/// figures are then judged in one place ([`quality`](crate::quality)): planar, shapeless,
+/// outlier-ridden, ambiguous, too eccentric or poorly covered data are
+/// refused with a specific [`Error`](crate::Error), milder findings reported as
+/// [`Warning`](crate::Warning)s.
+///
+/// # Flash
+/// The method and the LS variant are resolved to functions here, in a
+/// small wrapper inlined at the call site; the pipeline takes them as
+/// function pointers. With a constant [`Config`](crate::Config) (e.g. `Config::default()`)
+/// the optimiser sees which are used and links only those: LS9 + ADC2
+/// alone is what firmware pays for. A `Config` chosen at run time links
+/// every method its cargo features enable (see [Features](crate#features)):
+/// a method or LS variant whose feature is off is refused with
+/// [`Error::NotEnabled`](crate::Error::NotEnabled).
+#[inline(always)]
+pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
+    let step: methods::Step<T, S> = match config.method {
+        Method::Ls => methods::ls_only,
+        #[cfg(feature = "adc1")]
+        Method::Adc1 => methods::adc1::step,
+        Method::Adc2 => methods::adc2::step,
+        #[cfg(feature = "adc2-iter")]
+        Method::Adc2Iterated => methods::adc2_iter::step,
+        #[cfg(feature = "submle")]
+        Method::SubMle => methods::submle::step,
+        #[allow(unreachable_patterns)] // with every method enabled
+        other => {
+            return Err(Error::NotEnabled {
+                feature: other.feature(),
+            })
+        }
+    };
+    pipeline(samples, config, ellipsoid::solver(config.ls)?, step)
+}
+
+/// [`calibrate`] with the LS solve and the method's step resolved.
+fn pipeline<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+) -> Result<Fit<T>, Error> {
+    let scan = normalize::scan::<T, S>(samples, config.robust)?;
+    let gate = rules::Gate {
+        rules: scan.rules,
+        screen: None,
+    };
+    if config.robust && screen::clip_hint(samples, &gate, scan.used) {
+        // A clip level may bend the plain fit unseen: screening finds it.
+        return robust_path(samples, config, &scan, ls_solve, step);
+    }
+    // The plain result is returned as it is, or not at all: this frame
+    // then holds no second fit under the robust path (224 bytes of stack).
+    let mut clean = false;
+    let plain = plain_path(samples, config, &scan, ls_solve, step, &mut clean);
+    if clean || !config.robust {
+        return plain;
+    }
+    robust_path(samples, config, &scan, ls_solve, step)
+}
+
+/// What the steps before the method leave for it and for the judging.
+pub(super) struct Start<'r, T: Real> {
+    /// The robust LS's start ([`Report::start`]).
+    start: u8,
+    norm: normalize::Normalization<T>,
+    ls: ellipsoid::Ellipsoid<T>,
+    weights: methods::Weights<'r, T>,
+    robust_passes: u32,
+}
+
+/// Step 1 on the moments: the LS fit, and the quadric gap of the same
+/// scatter (judged after the method, against its radial RMS; see
+/// [`quality::REFUSE_QUADRIC_GAP`](crate::quality::REFUSE_QUADRIC_GAP)). Out of line, so the 10x10 scatter
+/// takes stack only while it is used.
+#[inline(never)]
+pub(crate) fn ls_step<T: Real>(
+    moments: &moments::Moments<T>,
+    solve: ellipsoid::Solve<T>,
+) -> (Result<ellipsoid::Ellipsoid<T>, Error>, Option<T>) {
+    let scatter = moments.scatter();
+    let quadric_gap = quality::quadric_gap(&scatter).ok();
+    (ellipsoid::fit_with(&scatter, solve), quadric_gap)
+}

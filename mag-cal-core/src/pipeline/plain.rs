@@ -1,0 +1,132 @@
+//! The plain path: every row the scan kept, weight 1.
+
+use super::*;
+
+/// A plain fit is taken as the robust one when no row's residual exceeds
+/// this many robust standard deviations, in the method's pass and in the
+/// final pass. Beyond it a row cannot be Gaussian noise of that sigma
+/// (probability 6e-7 a row); below it, the 0/1 weights at
+/// [`OUTLIER_CUT`](crate::OUTLIER_CUT) would leave out rows that move the fit by less than the
+/// noise. Clean data then pay no robust pass.
+pub const CLEAN_LIMIT: f64 = 5.0;
+
+/// A plain fit is taken as the robust one only when the RMS of its radial
+/// residuals is at most this many times their robust sigma: about 1 for
+/// Gaussian noise (0.8 for quantisation), more when a share of the rows
+/// lies off the ellipsoid. (Residuals at the level of rounding, an RMS
+/// below the square root of the type's epsilon, are not judged by it.)
+pub const CLEAN_TAIL: f64 = 1.25;
+
+/// A plain fit is not taken when the kurtosis `n sum e^4 / (sum e^2)^2`
+/// of the algebraic residuals `e = |u|^2 - 1` under its LS start (in the
+/// method's artificial-data pass) exceeds this: about 3 for Gaussian
+/// noise, below 2 for quantisation; 10 % of the rows displaced by 0.3 of
+/// the field give about 10. The robust path then starts without the plain
+/// method's solve and final pass.
+pub const CLEAN_KURTOSIS: f64 = 6.0;
+
+/// Nor when the skewness `sqrt(n) sum e^3 / (sum e^2)^(3/2)` of the same
+/// residuals is below minus this: a share of the rows pulled inwards, as
+/// an axis clipped on some reads pulls them (-1.5 when 30 % of the rows
+/// are; the robust path's screening then finds the clip levels). Noise
+/// skews the other way (`e = 2 n + n^2` for a radial noise `n`), and so do
+/// rows displaced outwards, which the kurtosis sees.
+pub const CLEAN_SKEWNESS: f64 = 1.0;
+
+/// Nor, for the LS fit alone, when its lack of fit about the mean radial
+/// residual ([`Quality::lack_of_fit`] without the common offset, which is
+/// the algebraic fit's shrinkage under noise) is significant and exceeds
+/// this many fit errors. LS's lack of fit is not judged, as its criterion
+/// leaves a pattern under noise; but that pattern grows with the noise, a
+/// displaced stretch of rows does not. Measured (f64, LS9): clean
+/// scenarios A-G at most 0.17 (200 runs each, E 0.13-0.17, A and C below
+/// 0.15); plain LS fits bent by a displaced patch or a moving disturbance
+/// (10-30 % of the rows) that passed every other test 0.36 or more, most
+/// above 0.44.
+pub const CLEAN_SHAPE: f64 = 0.3;
+
+/// The plain pipeline: every row the scan kept, weight 1. Returns the fit
+/// and sets `clean` when it is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::CLEAN_TAIL)). Out of line, as the robust
+/// path: inlined, both paths' locals would share `pipeline`'s frame.
+#[inline(never)]
+pub(super) fn plain_path<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+    clean: &mut bool,
+) -> Result<Fit<T>, Error> {
+    let mut figures = Figures::new(scan, config, false);
+    let start = plain_start(samples, config, scan, ls_solve, &mut figures)?;
+    let est = method_step(samples, config, &start, step, &figures)?;
+    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+    let method_clean = est
+        .max_residual
+        .zip(est.sigma)
+        .is_none_or(|(m, s)| clean_limit(m, s));
+    if config.robust && !method_clean {
+        // Not clean, and this fit will not be returned: no final pass
+        // (about 120 instructions a row on a Cortex-M4F).
+        return Err(Error::OutOfRange);
+    }
+    let done = finish(samples, config, &start, &est, &mut figures)?;
+    let fit = done.fit;
+    let sigma = fit.report.quality.fit_error;
+    // Heavy tails: a contamination that broadened every residual, so that
+    // none stands out.
+    let is_clean = method_clean
+        && clean_limit(done.final_max, sigma)
+        && !done.heavy_tails
+        && !done.misfit
+        && !done.misshapen;
+    *clean = is_clean;
+    Ok(fit)
+}
+
+/// The plain path up to the method: the moments and the LS fit, and the
+/// figures they give (into `figures`). Out of line, as [`robust_start`]:
+/// the moments take stack only until the method starts.
+#[inline(never)]
+pub(super) fn plain_start<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    figures: &mut Figures<T>,
+) -> Result<Start<'static, T>, Error> {
+    let norm = scan.norm;
+    // The rows the rules dropped stay out; without drops the scan's rules
+    // are plain, and so are the loops.
+    let gate = rules::Gate {
+        rules: scan.rules,
+        screen: None,
+    };
+    let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
+    if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
+        // Gross outliers: not worth a plain fit (the caller screens).
+        return Err(Error::OutOfRange);
+    }
+    figures.flatness = Some(quality::flatness(&moments, scan.used)?);
+    let (ls, gap) = match ls_step(&moments, ls_solve) {
+        (Ok(ls), gap) => (ls, gap),
+        // A failed fit of planar data is refused as planar.
+        (Err(e), _) => return Err(judge_failure(figures, config, e)),
+    };
+    figures.quadric_gap = gap;
+    let start = Start {
+        start: 0,
+        norm,
+        ls,
+        weights: methods::Weights {
+            gate,
+            runs: &runs::Runs::NONE,
+            sigma: None,
+            tails_limit: config
+                .robust
+                .then(|| (T::lit(CLEAN_KURTOSIS), T::lit(CLEAN_SKEWNESS))),
+        },
+        robust_passes: 0,
+    };
+    Ok(start)
+}
