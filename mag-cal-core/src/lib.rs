@@ -232,9 +232,6 @@
 // `!(x > 0)` is deliberate throughout: unlike `x <= 0` it is also true for
 // NaN, so a NaN never passes a validity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
-// Without every method, the helpers only the optional methods use (the
-// Anderson step, the dense solves, eigenvectors) are dead code.
-#![cfg_attr(not(feature = "all-methods"), allow(dead_code, unused_imports))]
 
 mod calibration;
 mod config;
@@ -250,7 +247,7 @@ mod robust;
 mod sample;
 mod steps;
 #[cfg(test)]
-mod test_rng;
+mod test_support;
 
 /// The crate README's example runs as a doctest.
 #[cfg(doctest)]
@@ -279,8 +276,10 @@ pub use steps::methods::{Method, OUTLIER_CUT};
 pub use steps::normalize::MIN_SAMPLES;
 pub use steps::rules::{Drops, Rule, SampleClass, Selection};
 
-/// Pieces of the pipeline for this repository's benchmarks and tests.
-/// Not part of the API: anything here may change or go in any release.
+/// Pieces of the pipeline for this repository's benchmarks and tests
+/// (feature `bench-internals`). Not part of the API: anything here may
+/// change or go in any release.
+#[cfg(feature = "bench-internals")]
 #[doc(hidden)]
 pub mod __unstable {
     pub use crate::steps::artificial::Stats;

@@ -425,7 +425,7 @@ mod tests {
     use super::*;
     use nalgebra::Rotation3;
 
-    use crate::test_rng::Rng;
+    use crate::test_support::Rng;
 
     fn arr(v: Vector3<f64>) -> [f64; 3] {
         [v.x, v.y, v.z]

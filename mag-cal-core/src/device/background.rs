@@ -1245,7 +1245,7 @@ fn far_enough(a: &[f32; 3], b: &[f32; 3], chord_sq: f32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_rng::Rng;
+    use crate::test_support::Rng;
 
     /// The rings, fill counts and cell tags describe the store exactly.
     fn consistent<const N: usize, const K: usize>(bg: &Background<f32, [f32; 3], N, K>) {

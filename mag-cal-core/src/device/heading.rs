@@ -321,7 +321,7 @@ mod tests {
     }
     use nalgebra::{Matrix3, Rotation3};
 
-    use crate::test_rng::Rng;
+    use crate::test_support::Rng;
 
     const RAD: f64 = core::f64::consts::PI / 180.0;
 

@@ -296,6 +296,7 @@ fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
 /// numerically positive definite.
 // Triangular loops: the indices are the algorithm; every one is below `M`.
 #[allow(clippy::needless_range_loop)]
+#[cfg(feature = "adc2-iter")]
 fn ldl_solve<T: Real, const M: usize>(mut a: [[T; M]; M], mut b: [T; M]) -> Option<[T; M]> {
     let mut piv = [T::zero(); M];
     for j in 0..M {
@@ -344,6 +345,7 @@ fn ldl_solve<T: Real, const M: usize>(mut a: [[T; M]; M], mut b: [T; M]) -> Opti
 /// normal equations with a Tikhonov term of 64 ulps of their trace (the
 /// columns grow collinear as the iteration converges); a failed solve falls
 /// back to the mixing step and a fresh history.
+#[cfg(feature = "adc2-iter")]
 #[derive(Clone, Debug)]
 pub struct Anderson<T: Real, const D: usize, const M: usize> {
     mixing: T,
@@ -357,12 +359,14 @@ pub struct Anderson<T: Real, const D: usize, const M: usize> {
     next: usize,
 }
 
+#[cfg(feature = "adc2-iter")]
 impl<T: Real, const D: usize, const M: usize> Default for Anderson<T, D, M> {
     fn default() -> Self {
         Self::new()
     }
 }
 
+#[cfg(feature = "adc2-iter")]
 impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
     /// An accelerator with no history and mixing 1 (the plain step
     /// `g(x)` when there is no history).
@@ -542,6 +546,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "adc2-iter")]
     fn ldl_solve_matches_lu_and_rejects_indefinite() {
         let l = SMatrix::<f64, 4, 4>::from_fn(|i, j| {
             if j <= i {
@@ -569,6 +574,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "adc2-iter")]
     fn anderson_accelerates_a_slow_linear_contraction() {
         // x = A x + c with spectral radius 0.95: plain iteration needs
         // hundreds of steps to 1e-12; Anderson(5) on a 3-D linear map

@@ -79,30 +79,6 @@ pub struct Stats<T: Real> {
 }
 
 impl<T: Real> Stats<T> {
-    /// No samples yet (for tests that build statistics by hand).
-    #[cfg(test)]
-    pub(crate) fn empty() -> Self {
-        Self {
-            count: 0,
-            s_h: Vector3::zeros(),
-            s_hh: Matrix3::zeros(),
-            s_r: Vector3::zeros(),
-            s_rh: Matrix3::zeros(),
-            s_rr: Matrix3::zeros(),
-        }
-    }
-
-    /// Adds one direction `h` and its residual `r`, by the definition.
-    #[cfg(test)]
-    pub(crate) fn add(&mut self, h: Vector3<T>, r: Vector3<T>) {
-        self.count += 1;
-        self.s_h += h;
-        self.s_hh += h * h.transpose();
-        self.s_r += r;
-        self.s_rh += r * h.transpose();
-        self.s_rr += r * r.transpose();
-    }
-
     /// `Q = [S_rh | s_r]` (3x4): residuals against the regressors `[h, 1]`.
     pub fn q(&self) -> Matrix3x4<T> {
         let mut q = Matrix3x4::zeros();
@@ -124,6 +100,7 @@ impl<T: Real> Stats<T> {
 
     /// Covariance of the start residuals, `S_rr/n - (s_r/n)(s_r/n)^T`: the
     /// paper's noise estimate for ADC1 (normalised units).
+    #[cfg(feature = "adc1")]
     pub fn residual_covariance(&self) -> Matrix3<T> {
         let n = T::from_count(self.count);
         let mean = self.s_r / n;
@@ -136,6 +113,7 @@ impl<T: Real> Stats<T> {
     /// [`Error::NotAnEllipsoid`] when `W0` is singular to working precision,
     /// [`Error::TooFewSamples`] when fewer than [`crate::MIN_SAMPLES`]
     /// samples have a direction.
+    #[cfg(any(test, feature = "bench-internals"))]
     pub fn accumulate<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
@@ -554,7 +532,7 @@ fn inverse<T: Real>(m: &Matrix3<T>) -> Option<Matrix3<T>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_rng::Rng;
+    use crate::test_support::{stats_by_definition, Rng};
 
     /// The statistics by their definition, sample by sample:
     /// `d = x - b0`, `u = W0 d`, `h = u/|u|`, `r = d - T0 h`.
@@ -565,20 +543,18 @@ mod tests {
         w0: &Matrix3<f64>,
     ) -> Stats<f64> {
         let t0 = w0.try_inverse().unwrap();
-        let mut s = Stats::empty();
-        for y in samples {
+        stats_by_definition(samples.iter().filter_map(|y| {
             if !y.iter().all(|v| v.is_finite()) {
-                continue;
+                return None;
             }
             let d = norm.forward(*y) - b0;
             let u = w0 * d;
             if u.norm() == 0.0 {
-                continue;
+                return None;
             }
             let h = u / u.norm();
-            s.add(h, d - t0 * h);
-        }
-        s
+            Some((h, d - t0 * h))
+        }))
     }
 
     /// The pass's sums of `h`, `e h` and `e^k h h^T`, mapped through `T0`,

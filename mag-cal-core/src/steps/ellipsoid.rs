@@ -3,10 +3,13 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
+#[cfg(feature = "lg10")]
+use crate::numerics::linalg::{cholesky, min_max, solve_lower, solve_lower_transposed};
 use crate::numerics::linalg::{
-    cholesky, cholesky_in_place, cholesky_solve, columns_of, from_columns, min_max, solve3,
-    solve_lower, solve_lower_transposed, sym_eigen, sym_sqrt_and_inv_sqrt,
+    cholesky_in_place, cholesky_solve, from_columns, solve3, sym_sqrt_and_inv_sqrt,
 };
+#[cfg(any(feature = "svd10", feature = "lg10"))]
+use crate::numerics::linalg::{columns_of, sym_eigen};
 use crate::{Error, Real};
 
 /// Which algebraic least-squares solve turns the moments into a quadric.
@@ -69,6 +72,7 @@ pub struct Ellipsoid<T: Real> {
 }
 
 /// Fits an ellipsoid to the 10x10 scatter with the chosen variant.
+#[cfg(feature = "bench-internals")]
 pub fn fit_scatter<T: Real>(
     s: &SMatrix<T, 10, 10>,
     variant: LsVariant,

@@ -28,6 +28,7 @@ pub struct Normalization<T: Real> {
 
 impl<T: Real> Normalization<T> {
     /// Maps a sensor-unit vector into normalised coordinates.
+    #[cfg(any(test, feature = "submle"))]
     #[inline]
     pub fn forward(&self, y: [T; 3]) -> Vector3<T> {
         Vector3::new(

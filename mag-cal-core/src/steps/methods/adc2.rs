@@ -179,7 +179,9 @@ pub fn solve_closed_form<T: Real>(
 }
 
 /// One ADC2 step from the LS fit: artificial data (one pass), then the
-/// solve on the statistics, then the canonical `W' = (T' T'^T)^(-1/2)`.
+/// solve on the statistics, then the canonical `W' = (T' T'^T)^(-1/2)`
+/// (for the benchmarks, which time it alone).
+#[cfg(feature = "bench-internals")]
 pub fn run<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,
@@ -215,21 +217,20 @@ pub(crate) fn step<T: Real, S: Sample>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::stats_by_definition;
 
     /// Statistics of a made-up but consistent regression problem: 40
     /// directions, residuals that are an exact affine function of `[h, 1]`
     /// plus a wobble, accumulated by hand.
     fn stats() -> Stats<f64> {
-        let mut s = Stats::empty();
-        for i in 0..40 {
+        stats_by_definition((0..40).map(|i| {
             let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / 40.0;
             let (r, phi) = (libm::sqrt(1.0 - z * z), f64::from(i) * 2.4);
             let h = Vector3::new(r * libm::cos(phi), r * libm::sin(phi), z);
             let wobble = 0.01 * libm::sin(f64::from(i) * 1.7);
             let res = Vector3::new(0.05 * h.x - 0.02, 0.03 * h.z + wobble, -0.04 * h.y + 0.01);
-            s.add(h, res);
-        }
-        s
+            (h, res)
+        }))
     }
 
     #[test]

@@ -154,6 +154,7 @@ pub(crate) struct Weights<'r, T: Real> {
     pub tails_limit: Option<(T, T)>,
 }
 
+#[cfg(feature = "bench-internals")]
 impl<T: Real> Weights<'static, T> {
     /// Every finite row, weight 1: the plain methods.
     pub(crate) const PLAIN: Self = Self {
@@ -171,6 +172,7 @@ impl<T: Real> Weights<'_, T> {
     }
 
     /// The same gate with a new sigma.
+    #[cfg(feature = "adc2-iter")]
     pub(crate) fn with_sigma(&self, sigma: Option<T>) -> Self {
         Self {
             gate: self.gate,

@@ -64,12 +64,6 @@ pub struct SubMleObjective<'a, T: Real, S: Sample> {
 }
 
 impl<'a, T: Real, S: Sample> SubMleObjective<'a, T, S> {
-    /// The objective over `samples`.
-    #[cfg(test)]
-    pub fn new(samples: &'a [S], norm: &'a Normalization<T>) -> Self {
-        Self::gated(samples, norm, Gate::PLAIN, Runs::NONE)
-    }
-
     /// The objective over the rows `gate` passes outside the spans of
     /// `runs`.
     pub(crate) fn gated(
@@ -213,7 +207,7 @@ mod tests {
             scale: 1.0,
             inv_scale: 1.0,
         };
-        let f = SubMleObjective::new(&samples, &norm);
+        let f = SubMleObjective::gated(&samples, &norm, Gate::PLAIN, Runs::NONE);
         let x = SVector::<f64, PARAMS>::from_column_slice(&[
             0.9, 0.05, -0.02, 1.2, 0.03, 1.05, 0.08, -0.15, 0.04,
         ]);

@@ -1,4 +1,5 @@
-//! A small deterministic generator for the unit tests' data (xorshift64*).
+//! What the unit tests share: a small deterministic generator for their
+//! data (xorshift64*), and statistics built by their definition.
 
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
@@ -38,4 +39,28 @@ impl Rng {
         let axis = Unit::new_normalize(self.direction());
         *Rotation3::from_axis_angle(&axis, core::f64::consts::PI * self.uniform()).matrix()
     }
+}
+
+/// The artificial-data statistics of directions `h` and residuals `r`,
+/// summed by their definition (for tests that build them by hand).
+pub(crate) fn stats_by_definition(
+    pairs: impl IntoIterator<Item = (Vector3<f64>, Vector3<f64>)>,
+) -> crate::steps::artificial::Stats<f64> {
+    let mut s = crate::steps::artificial::Stats {
+        count: 0,
+        s_h: Vector3::zeros(),
+        s_hh: Matrix3::zeros(),
+        s_r: Vector3::zeros(),
+        s_rh: Matrix3::zeros(),
+        s_rr: Matrix3::zeros(),
+    };
+    for (h, r) in pairs {
+        s.count += 1;
+        s.s_h += h;
+        s.s_hh += h * h.transpose();
+        s.s_r += r;
+        s.s_rh += r * h.transpose();
+        s.s_rr += r * r.transpose();
+    }
+    s
 }
