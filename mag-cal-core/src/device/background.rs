@@ -55,10 +55,11 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::device::collector::{self, CentreFit};
+use crate::device::collector;
 use crate::device::offsets::{refit_offsets, Strength};
 use crate::judge::quality::{self, Figures};
 use crate::numerics::linalg::{dot, larger, sym_inv_sqrt};
+use crate::numerics::sphere::CentreFit;
 use crate::robust::runs::Runs;
 use crate::sample::Sample;
 use crate::steps::artificial::{Pass, PassSums, Residuals};

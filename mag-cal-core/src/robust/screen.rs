@@ -38,9 +38,9 @@
 //! Every pass is a cheap histogram pass (10-25 instructions a sample on a
 //! Cortex-M4F); nothing is sorted or stored per sample.
 
-use crate::device::collector::CentreFit;
 use crate::numerics::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
 use crate::numerics::linalg::{larger, smaller};
+use crate::numerics::sphere::CentreFit;
 use crate::sample::Sample;
 use crate::steps::normalize::{Normalization, Scan};
 use crate::steps::rules::{
