@@ -379,7 +379,7 @@ fn shell<T: Real, S: Sample>(
 /// The algebraic sphere fit's centre and its median distance, or `None`
 /// when it has none; and the passes it took (two, subsampled).
 ///
-/// Kasa's fit (the collector's running centre, [`crate::device::collector`]) over
+/// Kasa's fit (the running sphere fit of [`crate::numerics::sphere`]) over
 /// the subsampled rows within [`RECENTRE_RADIUS`]` m` of the median centre
 /// `c`, in units of `m` about `c` (so that `f32` suffices whatever the
 /// offset): exact for samples on any part of a sphere, however unevenly
