@@ -161,6 +161,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         directions: None,
         sigma: None,
         max_residual: None,
+        beyond_tails_limit: false,
     })
 }
 
