@@ -58,7 +58,7 @@
 use crate::device::heading::{atan2_deg, wrap_deg};
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
-use crate::robust::screen::screen;
+use crate::robust::screen::{screen, Unscreened};
 use crate::sample::Sample;
 use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
 use crate::steps::normalize::{scan, MIN_SAMPLES};
@@ -325,7 +325,16 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
     let scanned = scan::<T, S>(samples, true)?;
-    let screening = screen(samples, &scanned, config.thresholds.refuse_fit_error)?;
+    let screening = match screen(samples, &scanned) {
+        Ok(s) => s,
+        Err(Unscreened::AllEqual) => return Err(Error::AllSamplesEqual),
+        Err(Unscreened::Crowded) => {
+            return Err(Error::NoSphere {
+                fit_error: Figure::new(f32::INFINITY),
+                limit: Figure::new(config.thresholds.refuse_fit_error),
+            })
+        }
+    };
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
