@@ -1,4 +1,4 @@
-//! The one error type of the crate.
+//! The fit's error type, and the printing of figures against limits.
 
 use core::fmt;
 
@@ -6,7 +6,8 @@ use core::fmt;
 ///
 /// Every input, however malformed, ends either in a calibration or in one of
 /// these values; the core never panics. The enum is `Copy` and small so that
-/// firmware can log or store it without ceremony.
+/// firmware can log or store it without ceremony. Stored records fail with
+/// [`crate::persist::Error`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
@@ -128,17 +129,6 @@ pub enum Error {
         /// The limit it exceeds.
         limit: Figure,
     },
-    /// Stored calibration bytes end early.
-    Truncated,
-    /// Stored calibration bytes do not start with the expected magic.
-    BadMagic,
-    /// Stored calibration bytes have a format version this build cannot read.
-    UnsupportedVersion {
-        /// Version found.
-        found: u8,
-    },
-    /// Stored calibration bytes fail their checksum.
-    ChecksumMismatch,
     /// An offsets-only fit: the readings' directions cover too small a cap
     /// to determine the offsets ([`crate::device::offsets`]).
     OffsetsUndetermined {
@@ -274,12 +264,6 @@ impl fmt::Display for Error {
                  a disturbance moved part of the trajectory; collect again away from magnets and currents",
                 Versus::new(lack_of_fit, limit, ""),
             ),
-            Error::Truncated => f.write_str("stored calibration is truncated"),
-            Error::BadMagic => f.write_str("stored bytes are not a calibration (bad magic)"),
-            Error::UnsupportedVersion { found } => {
-                write!(f, "stored calibration has unsupported format version {found}")
-            }
-            Error::ChecksumMismatch => f.write_str("stored calibration fails its checksum"),
             Error::OffsetsUndetermined { determinacy, limit } => write!(
                 f,
                 "the readings cover too few directions to determine the offsets (determinacy {}): turn the sensor further",
@@ -583,10 +567,6 @@ mod tests {
             | Error::MismatchedLengths
             | Error::NotEnabled { .. }
             | Error::InvalidNoiseCovariance
-            | Error::Truncated
-            | Error::BadMagic
-            | Error::UnsupportedVersion { .. }
-            | Error::ChecksumMismatch
             | Error::ShortArc { .. } => None,
             Error::Planar { flatness: x, limit }
             | Error::AmbiguousQuadric {
@@ -663,10 +643,6 @@ mod tests {
         FilledCloud,
         TooManyOutliers,
         SystematicMisfit,
-        Truncated,
-        BadMagic,
-        UnsupportedVersion,
-        ChecksumMismatch,
         OffsetsUndetermined,
         NotPlanar,
         NoEllipse,
@@ -718,10 +694,6 @@ mod tests {
             Error::MismatchedLengths,
             Error::NotEnabled { feature: "submle" },
             Error::InvalidNoiseCovariance,
-            Error::Truncated,
-            Error::BadMagic,
-            Error::UnsupportedVersion { found: 7 },
-            Error::ChecksumMismatch,
             Error::ShortArc {
                 sectors: 7,
                 required: 8
