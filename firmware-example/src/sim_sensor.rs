@@ -717,7 +717,7 @@ impl Bench<'_> {
         previous: Option<&mag_cal_core::Calibration<f32>>,
     ) -> bool {
         use crate::storage::LoadError::Record;
-        use mag_cal_core::Error;
+        use mag_cal_core::persist::Error;
         let ok = match boot {
             1 => outcome == BootOutcome::Calibrated(Record(Error::BadMagic)),
             2 => outcome == BootOutcome::Loaded && previous == Some(calibration),

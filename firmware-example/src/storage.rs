@@ -115,7 +115,7 @@ pub enum LoadError {
     Storage,
     /// The record was refused by [`persist::from_bytes`] (erased page:
     /// `BadMagic`; corruption: `ChecksumMismatch`; ...).
-    Record(mag_cal_core::Error),
+    Record(persist::Error),
     /// The record is intact but its values are not a plausible calibration
     /// of this sensor ([`plausible`]).
     Implausible,

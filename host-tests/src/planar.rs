@@ -6,7 +6,7 @@
 
 use mag_cal_core::heading::heading_deg;
 use mag_cal_core::planar::{calibrate_planar, PlanarConfig, PlanarFit};
-use mag_cal_core::{calibrate, Config, Error};
+use mag_cal_core::{calibrate, Config};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use crate::sim::{fibonacci_sphere, Rng};
@@ -83,7 +83,7 @@ pub fn errors(est: &[f64], truth: &[f64]) -> (f64, f64) {
 }
 
 /// The planar fit with the default configuration.
-pub fn planar(samples: &[[f64; 3]]) -> Result<PlanarFit<f64>, Error> {
+pub fn planar(samples: &[[f64; 3]]) -> Result<PlanarFit<f64>, mag_cal_core::planar::Error> {
     calibrate_planar::<f64, _>(samples, &PlanarConfig::default())
 }
 

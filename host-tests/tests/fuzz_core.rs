@@ -1120,7 +1120,10 @@ fn collector_persist_case(seed: u64, index: u64) -> Result<u64, String> {
                 }
             }
             Err(e) => {
-                if valid && !mutated && !matches!(e, Error::OutOfRange | Error::SingularSystem) {
+                if valid
+                    && !mutated
+                    && !matches!(e, persist::Error::OutOfRange | persist::Error::Singular)
+                {
                     return Err(format!("a valid record was refused: {e:?}"));
                 }
             }

@@ -9,7 +9,7 @@ use host_tests::planar::{
 };
 use host_tests::real::read_xyz;
 use host_tests::sim::{fibonacci_sphere, Rng};
-use mag_cal_core::planar::{calibrate_planar, PlanarConfig, PlanarFit};
+use mag_cal_core::planar::{self, calibrate_planar, PlanarConfig, PlanarFit};
 use mag_cal_core::{calibrate, Config, Error};
 use nalgebra::{Matrix3, Vector3};
 
@@ -103,7 +103,7 @@ fn refuses_what_is_not_a_turn_about_one_axis() {
         .map(|h| reading(h, &mut rng))
         .collect();
     assert!(
-        matches!(planar(&sphere), Err(Error::NotPlanar { .. })),
+        matches!(planar(&sphere), Err(planar::Error::NotPlanar { .. })),
         "{:?}",
         planar(&sphere).map(|f| f.report)
     );
@@ -112,7 +112,7 @@ fn refuses_what_is_not_a_turn_about_one_axis() {
         .map(|i| reading(attitude(i as f64 * 0.0157, 0.0, 0.0) * earth(), &mut rng))
         .collect();
     assert!(
-        matches!(planar(&half), Err(Error::ShortArc { .. })),
+        matches!(planar(&half), Err(planar::Error::ShortArc { .. })),
         "{:?}",
         planar(&half).map(|f| f.report)
     );
@@ -120,7 +120,10 @@ fn refuses_what_is_not_a_turn_about_one_axis() {
     let still: Vec<[f64; 3]> = (0..200).map(|_| reading(earth(), &mut rng)).collect();
     let e = planar(&still).unwrap_err();
     assert!(
-        matches!(e, Error::NoEllipse { .. } | Error::NotPlanar { .. }),
+        matches!(
+            e,
+            planar::Error::NoEllipse { .. } | planar::Error::NotPlanar { .. }
+        ),
         "{e}"
     );
     // A flat disc filled with points: no ellipse.
@@ -132,7 +135,7 @@ fn refuses_what_is_not_a_turn_about_one_axis() {
         })
         .collect();
     let e = planar(&disc).unwrap_err();
-    assert!(matches!(e, Error::NoEllipse { .. }), "{e}");
+    assert!(matches!(e, planar::Error::NoEllipse { .. }), "{e}");
 }
 
 #[test]

@@ -44,6 +44,8 @@ pub enum CliError {
     },
     /// The core refused to calibrate.
     Refused(mag_cal_core::Error),
+    /// The core refused a planar calibration (`magcal planar`).
+    PlanarRefused(mag_cal_core::planar::Error),
     /// A replay through the background calibrator ended without a
     /// calibration (`magcal background`): why, with the core's reason.
     NotCalibrated(String),
@@ -53,7 +55,9 @@ impl CliError {
     /// The process exit code for this error.
     pub fn exit_code(&self) -> i32 {
         match self {
-            CliError::Refused(_) | CliError::NotCalibrated(_) => i32::from(EXIT_REFUSED),
+            CliError::Refused(_) | CliError::PlanarRefused(_) | CliError::NotCalibrated(_) => {
+                i32::from(EXIT_REFUSED)
+            }
             _ => i32::from(EXIT_USAGE),
         }
     }
@@ -81,6 +85,7 @@ impl fmt::Display for CliError {
                 "calibration refused: {err} (a device that turns about one axis only: 'magcal planar')"
             ),
             CliError::Refused(err) => write!(f, "calibration refused: {err}"),
+            CliError::PlanarRefused(err) => write!(f, "calibration refused: {err}"),
             CliError::NotCalibrated(reason) => write!(f, "no calibration: {reason}"),
         }
     }
@@ -93,6 +98,7 @@ impl std::error::Error for CliError {
                 Some(err)
             }
             CliError::Refused(err) => Some(err),
+            CliError::PlanarRefused(err) => Some(err),
             CliError::Parse { .. } | CliError::Input(_) | CliError::NotCalibrated(_) => None,
         }
     }
@@ -101,6 +107,12 @@ impl std::error::Error for CliError {
 impl From<mag_cal_core::Error> for CliError {
     fn from(err: mag_cal_core::Error) -> Self {
         CliError::Refused(err)
+    }
+}
+
+impl From<mag_cal_core::planar::Error> for CliError {
+    fn from(err: mag_cal_core::planar::Error) -> Self {
+        CliError::PlanarRefused(err)
     }
 }
 
@@ -163,5 +175,19 @@ mod tests {
         let err = CliError::from(mag_cal_core::Error::AllSamplesEqual);
         assert_eq!(err.exit_code(), 3);
         assert!(err.to_string().starts_with("calibration refused: "));
+        // A planar refusal, its own or one it shares with the fit: the
+        // same code, the same words.
+        let shared = mag_cal_core::planar::Error::Fit(mag_cal_core::Error::AllSamplesEqual);
+        let err = CliError::from(shared);
+        assert_eq!(err.exit_code(), 3);
+        assert_eq!(
+            err.to_string(),
+            CliError::from(mag_cal_core::Error::AllSamplesEqual).to_string()
+        );
+        let short = mag_cal_core::planar::Error::ShortArc {
+            sectors: 7,
+            required: 8,
+        };
+        assert_eq!(CliError::from(short).exit_code(), 3);
     }
 }

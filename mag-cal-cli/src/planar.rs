@@ -43,7 +43,7 @@ pub fn outputs(
     match args.precision {
         Precision::F64 => {
             let fit = calibrate_planar::<f64, _>(&table.samples, &config);
-            let fit = fit.map_err(CliError::Refused)?;
+            let fit = fit.map_err(CliError::PlanarRefused)?;
             formats
                 .iter()
                 .map(|&format| render(fit, args, format, table, name))
@@ -52,7 +52,7 @@ pub fn outputs(
         Precision::F32 => {
             let rows: Vec<[f32; 3]> = table.samples.iter().map(|s| s.map(|v| v as f32)).collect();
             let fit = calibrate_planar::<f32, _>(&rows, &config);
-            let fit = fit.map_err(CliError::Refused)?;
+            let fit = fit.map_err(CliError::PlanarRefused)?;
             formats
                 .iter()
                 .map(|&format| render(fit, args, format, table, name))

@@ -7,9 +7,9 @@
 //! ```
 
 use mag_cal_core::persist::{from_bytes, to_bytes, ENCODED_LEN};
-use mag_cal_core::{calibrate, Config, Error};
+use mag_cal_core::{calibrate, Config};
 
-fn main() -> Result<(), Error> {
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     // A calibration from samples on an offset, stretched sphere.
     let samples: Vec<[i16; 3]> = (0..300)
         .map(|i| {

@@ -217,13 +217,14 @@ fn a_method_left_out_is_refused_by_its_feature() {
 }
 
 /// A device lying still (most rows on one point): refused by the
-/// screening, naming the caller's fit-error limit, not the default one.
+/// screening, naming the caller's fit-error limit, not the default one;
+/// its infinite fit error is refused whatever the limit.
 #[test]
 fn a_still_device_names_the_configured_limit() {
     let still: Vec<[i16; 3]> = (0..200)
         .map(|i| [120 + i % 3, -40 + i % 5, 300 + i % 2])
         .collect();
-    for limit in [0.2f32, 0.3, 0.123] {
+    for limit in [0.2f32, 0.3, 0.123, f32::INFINITY] {
         let cfg = Config {
             thresholds: mag_cal_core::Thresholds {
                 refuse_fit_error: limit,
@@ -238,5 +239,77 @@ fn a_still_device_names_the_configured_limit() {
         );
         let shown = format!("fit error limit {limit})");
         assert!(e.to_string().contains(&shown), "{e}");
+    }
+}
+
+/// A noise ball (a Gaussian blob, no shell) and a flat circle, judged with
+/// limits the caller set: each refusal names that limit, on the plain path
+/// and through the screening of the robust one.
+#[test]
+fn refusals_name_the_configured_limits() {
+    // A Gaussian blob of 600 rows (Box-Muller on a fixed LCG).
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let mut normal = || {
+        let (u, v) = (uniform(), uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let ball: Vec<[f64; 3]> = (0..600)
+        .map(|_| {
+            [
+                200.0 + 80.0 * normal(),
+                -50.0 + 80.0 * normal(),
+                30.0 + 80.0 * normal(),
+            ]
+        })
+        .collect();
+    // A circle in a tilted plane: flatness 0.
+    let circle: Vec<[f64; 3]> = directions(400)
+        .iter()
+        .map(|h| {
+            let a = h.z * std::f64::consts::PI;
+            [
+                100.0 + 300.0 * a.cos(),
+                20.0 + 300.0 * a.sin(),
+                5.0 + 30.0 * a.sin(),
+            ]
+        })
+        .collect();
+    for robust in [true, false] {
+        for limit in [0.15f32, 0.2, 0.3] {
+            let config = Config {
+                robust,
+                thresholds: mag_cal_core::Thresholds {
+                    refuse_fit_error: limit,
+                    ..mag_cal_core::Thresholds::DEFAULT
+                },
+                ..Config::default()
+            };
+            let e = calibrate::<f32, _>(&ball, &config).unwrap_err();
+            assert!(
+                matches!(e, Error::NoSphere { fit_error, limit: l } if l.get() == limit && fit_error.get() > limit),
+                "robust {robust}, limit {limit}: {e:?}"
+            );
+            assert!(e.to_string().contains(&format!(", limit {limit}")), "{e}");
+        }
+        for limit in [0.01f32, 0.05] {
+            let config = Config {
+                robust,
+                thresholds: mag_cal_core::Thresholds {
+                    refuse_flatness: limit,
+                    ..mag_cal_core::Thresholds::DEFAULT
+                },
+                ..Config::default()
+            };
+            let e = calibrate::<f64, _>(&circle, &config).unwrap_err();
+            assert!(
+                matches!(e, Error::Planar { limit: l, .. } if l.get() == limit),
+                "robust {robust}, limit {limit}: {e:?}"
+            );
+            assert!(e.to_string().contains(&format!(", limit {limit})")), "{e}");
+        }
     }
 }

@@ -1,7 +1,7 @@
 //! Stored calibrations: round trips, corruption, truncation, hostile bytes.
 
 use mag_cal_core::persist::{
-    crc32, from_bytes, to_bytes, ENCODED_LEN, MAGIC, PRECISION_F32, PRECISION_F64, VERSION,
+    self, crc32, from_bytes, to_bytes, ENCODED_LEN, MAGIC, PRECISION_F32, PRECISION_F64, VERSION,
 };
 use mag_cal_core::{calibrate, Calibration, Config, Error};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -209,15 +209,15 @@ fn every_single_bit_flip_is_detected() {
             let r64 = from_bytes::<f64>(&b);
             assert_eq!(r32.err(), r64.err(), "bit {bit}");
             match r64 {
-                Err(Error::BadMagic) => {
+                Err(persist::Error::BadMagic) => {
                     assert!(bit < 32);
                     counts[0] += 1;
                 }
-                Err(Error::UnsupportedVersion { found }) => {
+                Err(persist::Error::UnsupportedVersion { found }) => {
                     assert!((32..40).contains(&bit) && found == VERSION ^ (1 << (bit % 8)));
                     counts[1] += 1;
                 }
-                Err(Error::ChecksumMismatch) => {
+                Err(persist::Error::ChecksumMismatch) => {
                     assert!(bit >= 40);
                     counts[2] += 1;
                 }
@@ -234,12 +234,12 @@ fn every_truncation_is_detected() {
     for len in 0..ENCODED_LEN {
         assert_eq!(
             from_bytes::<f32>(&bytes[..len]),
-            Err(Error::Truncated),
+            Err(persist::Error::Truncated),
             "{len}"
         );
         assert_eq!(
             from_bytes::<f64>(&bytes[..len]),
-            Err(Error::Truncated),
+            Err(persist::Error::Truncated),
             "{len}"
         );
     }
@@ -254,8 +254,14 @@ fn longer_input_reads_the_first_record() {
     assert_eq!(from_bytes::<f32>(&page), from_bytes::<f32>(&to_bytes(&cal)));
     assert!(from_bytes::<f32>(&page).is_ok());
     // Erased flash alone.
-    assert_eq!(from_bytes::<f32>(&[0xFF; 256]), Err(Error::BadMagic));
-    assert_eq!(from_bytes::<f32>(&[0; ENCODED_LEN]), Err(Error::BadMagic));
+    assert_eq!(
+        from_bytes::<f32>(&[0xFF; 256]),
+        Err(persist::Error::BadMagic)
+    );
+    assert_eq!(
+        from_bytes::<f32>(&[0; ENCODED_LEN]),
+        Err(persist::Error::BadMagic)
+    );
 }
 
 #[test]
@@ -266,7 +272,7 @@ fn other_versions_are_refused_even_with_a_valid_crc() {
         reseal(&mut bytes);
         assert_eq!(
             from_bytes::<f64>(&bytes),
-            Err(Error::UnsupportedVersion { found: version })
+            Err(persist::Error::UnsupportedVersion { found: version })
         );
     }
 }
@@ -280,12 +286,12 @@ fn inconsistent_records_with_a_valid_crc_are_refused() {
         reseal(&mut b);
         assert_eq!(
             from_bytes::<f64>(&b),
-            Err(Error::ChecksumMismatch),
+            Err(persist::Error::ChecksumMismatch),
             "{what}"
         );
         assert_eq!(
             from_bytes::<f32>(&b),
-            Err(Error::ChecksumMismatch),
+            Err(persist::Error::ChecksumMismatch),
             "{what}"
         );
     };
@@ -320,12 +326,33 @@ fn values_beyond_f32_range_are_refused_in_f32_only() {
     let cal = cal_new::<f64>(Vector3::new(1e300, 0.0, 0.0), Matrix3::identity() * 1e-3).unwrap();
     let bytes = to_bytes(&cal);
     assert_eq!(from_bytes::<f64>(&bytes), Ok(cal));
-    assert_eq!(from_bytes::<f32>(&bytes), Err(Error::OutOfRange));
+    assert_eq!(from_bytes::<f32>(&bytes), Err(persist::Error::OutOfRange));
     // A W so small that it vanishes in f32.
     let cal = cal_new::<f64>(Vector3::zeros(), Matrix3::identity() * 1e-60).unwrap();
     let bytes = to_bytes(&cal);
     assert!(from_bytes::<f64>(&bytes).is_ok());
-    assert!(from_bytes::<f32>(&bytes).is_err());
+    assert_eq!(from_bytes::<f32>(&bytes), Err(persist::Error::Singular));
+}
+
+/// Every way a record fails has a sentence of its own, on one line.
+#[test]
+fn every_persist_error_has_its_sentence() {
+    use persist::Error as E;
+    let all = [
+        E::Truncated,
+        E::BadMagic,
+        E::UnsupportedVersion { found: 7 },
+        E::ChecksumMismatch,
+        E::OutOfRange,
+        E::Singular,
+    ];
+    let texts: Vec<String> = all.iter().map(ToString::to_string).collect();
+    for t in &texts {
+        assert!(t.starts_with("stored "), "{t}");
+        assert!(t.is_ascii() && !t.contains('\n'), "{t}");
+        assert_eq!(texts.iter().filter(|u| *u == t).count(), 1, "{t}");
+    }
+    assert!(texts[2].ends_with("version 7"), "{}", texts[2]);
 }
 
 #[test]

@@ -31,7 +31,7 @@ use core::mem::{align_of, size_of};
 
 use mag_cal_core::collector::{Collector, Offer};
 use mag_cal_core::heading::{heading_deg, tilt_compensated_heading_deg, HeadingSmoother};
-use mag_cal_core::persist::{from_bytes, to_bytes, ENCODED_LEN};
+use mag_cal_core::persist::{self, from_bytes, to_bytes, ENCODED_LEN};
 use mag_cal_core::{
     calibrate, Calibration, Config, Error, Figure, Fit, LsVariant, Method, Real, Sample, Thresholds,
 };
@@ -151,10 +151,20 @@ impl From<Error> for MagcalStatus {
             Error::FilledCloud { .. } => Self::FilledCloud,
             Error::TooManyOutliers { .. } => Self::TooManyOutliers,
             Error::SystematicMisfit { .. } => Self::SystematicMisfit,
-            Error::Truncated => Self::Truncated,
-            Error::BadMagic => Self::BadMagic,
-            Error::UnsupportedVersion { .. } => Self::UnsupportedVersion,
-            Error::ChecksumMismatch => Self::ChecksumMismatch,
+            _ => Self::Other,
+        }
+    }
+}
+
+impl From<persist::Error> for MagcalStatus {
+    fn from(e: persist::Error) -> Self {
+        match e {
+            persist::Error::Truncated => Self::Truncated,
+            persist::Error::BadMagic => Self::BadMagic,
+            persist::Error::UnsupportedVersion { .. } => Self::UnsupportedVersion,
+            persist::Error::ChecksumMismatch => Self::ChecksumMismatch,
+            persist::Error::OutOfRange => Self::OutOfRange,
+            persist::Error::Singular => Self::SingularSystem,
             _ => Self::Other,
         }
     }
@@ -314,10 +324,6 @@ impl MagcalRefusal {
                 count: iterations,
                 ..Self::plain(status)
             },
-            Error::UnsupportedVersion { found } => Self {
-                count: u32::from(found),
-                ..Self::plain(status)
-            },
             Error::NotEnabled { feature } => Self {
                 count: feature_number(feature),
                 ..Self::plain(status)
@@ -364,9 +370,10 @@ impl MagcalRefusal {
 
     /// The core's error back, for its message; `None` for a status that
     /// is no error of the core (its sentence is `magcal_error_str`'s).
-    fn to_core(self) -> Option<Error> {
+    fn to_core(self) -> Option<CoreError> {
         let (figure, limit) = (Figure::new(self.figure), Figure::new(self.limit));
-        Some(match self.status {
+        let record = |e| Some(CoreError::Record(e));
+        Some(CoreError::Fit(match self.status {
             MagcalStatus::TooFewSamples => Error::TooFewSamples {
                 found: self.count as usize,
                 required: self.of as usize,
@@ -419,18 +426,37 @@ impl MagcalRefusal {
                 lack_of_fit: figure,
                 limit,
             },
-            MagcalStatus::Truncated => Error::Truncated,
-            MagcalStatus::BadMagic => Error::BadMagic,
-            MagcalStatus::UnsupportedVersion => Error::UnsupportedVersion {
-                found: u8::try_from(self.count).unwrap_or(u8::MAX),
-            },
-            MagcalStatus::ChecksumMismatch => Error::ChecksumMismatch,
+            MagcalStatus::Truncated => return record(persist::Error::Truncated),
+            MagcalStatus::BadMagic => return record(persist::Error::BadMagic),
+            MagcalStatus::UnsupportedVersion => {
+                return record(persist::Error::UnsupportedVersion {
+                    found: u8::try_from(self.count).unwrap_or(u8::MAX),
+                })
+            }
+            MagcalStatus::ChecksumMismatch => return record(persist::Error::ChecksumMismatch),
             MagcalStatus::Ok
             | MagcalStatus::NullPointer
             | MagcalStatus::InvalidArgument
             | MagcalStatus::Undefined
             | MagcalStatus::Other => return None,
-        })
+        }))
+    }
+}
+
+/// An error of the core as a refusal holds it: the fit's, or a stored
+/// record's (`magcal_from_bytes`; `count` holds the version found).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum CoreError {
+    Fit(Error),
+    Record(persist::Error),
+}
+
+impl core::fmt::Display for CoreError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            CoreError::Fit(e) => e.fmt(f),
+            CoreError::Record(e) => e.fmt(f),
+        }
     }
 }
 
@@ -1689,10 +1715,6 @@ mod tests {
                 lack_of_fit: f(0.0123),
                 limit: f(0.01),
             },
-            Error::Truncated,
-            Error::BadMagic,
-            Error::UnsupportedVersion { found: 7 },
-            Error::ChecksumMismatch,
         ];
         for e in errors {
             let r = MagcalRefusal::from_core(e);
@@ -1715,6 +1737,20 @@ mod tests {
                 Error::NotEnabled { feature } => assert_eq!(name, feature),
                 _ => assert_eq!(name.is_empty(), r.limit == 0.0, "{e:?}"),
             }
+        }
+        // A stored record's refusals (`magcal_from_bytes`' statuses): the
+        // core's `persist` sentences, the version found in `count`.
+        for (e, count) in [
+            (persist::Error::Truncated, 0),
+            (persist::Error::BadMagic, 0),
+            (persist::Error::UnsupportedVersion { found: 7 }, 7),
+            (persist::Error::ChecksumMismatch, 0),
+        ] {
+            let r = MagcalRefusal {
+                count,
+                ..MagcalRefusal::plain(MagcalStatus::from(e))
+            };
+            assert_eq!(message(&r, 512).0, e.to_string(), "{e:?}");
         }
         // Statuses of the C API alone: `magcal_error_str`'s sentence.
         let bad = MagcalRefusal::plain(MagcalStatus::InvalidArgument);

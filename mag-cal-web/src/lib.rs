@@ -321,16 +321,18 @@ fn columns_in_page_terms(used: &ColumnsUsed) -> String {
 /// The JSON of a refused or failed fit, and its exit code.
 fn failure(err: &CliError, mut doc: Value) -> (u32, String) {
     let code = u32::try_from(err.exit_code()).unwrap_or(2);
-    doc["status"] = json!(if matches!(err, CliError::Refused(_)) {
-        "refused"
-    } else {
-        "error"
-    });
+    doc["status"] = json!(
+        if matches!(err, CliError::Refused(_) | CliError::PlanarRefused(_)) {
+            "refused"
+        } else {
+            "error"
+        }
+    );
     doc["code"] = json!(code);
     doc["message"] = json!(message(err));
     doc["offer"] = match err {
         CliError::Refused(Error::Planar { .. }) => json!("planar"),
-        CliError::Refused(Error::NotPlanar { .. }) => json!("3d"),
+        CliError::PlanarRefused(mag_cal_core::planar::Error::NotPlanar { .. }) => json!("3d"),
         _ => Value::Null,
     };
     (code, doc.to_string())

@@ -45,8 +45,8 @@ use firmware_example::storage::{self, FlashStorage, LoadError, RECORD_LEN};
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
 use mag_cal_core::collector::{Collector, READY_SAMPLES};
-use mag_cal_core::persist::{from_bytes, to_bytes};
-use mag_cal_core::{calibrate, Calibration, Config, Error};
+use mag_cal_core::persist::{self, from_bytes, to_bytes};
+use mag_cal_core::{calibrate, Calibration, Config};
 use nalgebra::Vector3;
 
 /// The generated vectors (not formatted by rustfmt, not edited by hand).
@@ -289,18 +289,20 @@ fn persist_corruption() -> bool {
     let mut ok = true;
     for byte in 0..RECORD_LEN {
         let want = match byte {
-            0..=3 => Error::BadMagic,
-            4 => Error::UnsupportedVersion {
+            0..=3 => persist::Error::BadMagic,
+            4 => persist::Error::UnsupportedVersion {
                 found: good[4] ^ 0x01,
             },
-            _ => Error::ChecksumMismatch,
+            _ => persist::Error::ChecksumMismatch,
         };
         for bit in 0..8u8 {
             let mut bad = good;
             bad[byte] ^= 1 << bit;
             let got = from_bytes::<f32>(&bad);
             let expected = match want {
-                Error::UnsupportedVersion { .. } => Error::UnsupportedVersion { found: bad[4] },
+                persist::Error::UnsupportedVersion { .. } => {
+                    persist::Error::UnsupportedVersion { found: bad[4] }
+                }
                 other => other,
             };
             if got != Err(expected) {
@@ -315,8 +317,8 @@ fn persist_corruption() -> bool {
             }
         }
     }
-    ok &= from_bytes::<f32>(&[0xFF; RECORD_LEN]) == Err(Error::BadMagic);
-    ok &= from_bytes::<f32>(&good[..RECORD_LEN - 1]) == Err(Error::Truncated);
+    ok &= from_bytes::<f32>(&[0xFF; RECORD_LEN]) == Err(persist::Error::BadMagic);
+    ok &= from_bytes::<f32>(&good[..RECORD_LEN - 1]) == Err(persist::Error::Truncated);
     ok
 }
 
@@ -329,14 +331,14 @@ fn flash_storage() -> bool {
         return false;
     };
     let mut st = FlashStorage::new(SimFlash::new(), 0);
-    let mut ok = storage::load(&mut st) == Err(LoadError::Record(Error::BadMagic));
+    let mut ok = storage::load(&mut st) == Err(LoadError::Record(persist::Error::BadMagic));
     ok &= storage::store(&mut st, &cal).is_ok();
     ok &= storage::load(&mut st) == Ok(cal);
     let mut rest = [0u8; 64];
     ok &= embedded_storage::nor_flash::ReadNorFlash::read(st.flash_mut(), 4032, &mut rest).is_ok()
         && rest.iter().all(|&b| b == 0xFF);
     st.flash_mut().corrupt(60, 2);
-    ok &= storage::load(&mut st) == Err(LoadError::Record(Error::ChecksumMismatch));
+    ok &= storage::load(&mut st) == Err(LoadError::Record(persist::Error::ChecksumMismatch));
     ok &= storage::store(&mut st, &cal).is_ok() && storage::load(&mut st) == Ok(cal);
     ok &= st.flash_mut().erases() == 2;
     if !ok {

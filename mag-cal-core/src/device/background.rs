@@ -903,11 +903,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                             false,
                         );
                         figures.flatness = Some(flatness);
-                        let e = match quality::judge(&figures, &self.config.thresholds) {
-                            Err(refusal) => refusal,
-                            Ok(_) => e,
-                        };
-                        return self.refused(e);
+                        let th = &self.config.thresholds;
+                        return self.refused(quality::judge_failure(&figures, th, e));
                     }
                 };
                 let stage = Stage::Adc {

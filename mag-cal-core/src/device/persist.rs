@@ -33,7 +33,8 @@
 //! field strength with the stored `W` (and that `W` is positive definite),
 //! and finally rebuilds the calibration from the stored canonical `W` as it
 //! is, validating finiteness and non-singularity in the reader's precision
-//! (an `f64` round trip is exact).
+//! (an `f64` round trip is exact). It fails with this module's own
+//! [`Error`], four ways for the bytes and two for the values.
 //!
 //! ```
 //! use mag_cal_core::Calibration;
@@ -46,12 +47,67 @@
 //! let back = from_bytes::<f64>(&bytes)?;
 //! assert_eq!(back.hard_iron(), cal.hard_iron().map(f64::from));
 //! assert!((back.field_strength() - 320.0).abs() < 1e-3);
-//! # Ok::<(), mag_cal_core::Error>(())
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+
+use core::fmt;
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::{Calibration, Error, Real};
+use crate::{Calibration, Real};
+
+/// Why stored bytes do not read back as a calibration ([`from_bytes`]).
+///
+/// Small and `Copy`, as the fit's [`crate::Error`], of which it shares
+/// none of the refusals: a record is damaged or foreign, or its values do
+/// not make a calibration in the reader's precision.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// Fewer than [`ENCODED_LEN`] bytes.
+    Truncated,
+    /// The bytes do not start with [`MAGIC`] (erased flash, another
+    /// record).
+    BadMagic,
+    /// A format version this build cannot read.
+    UnsupportedVersion {
+        /// Version found.
+        found: u8,
+    },
+    /// The bytes fail their checksum, or pass it but are not what
+    /// [`to_bytes`] writes.
+    ChecksumMismatch,
+    /// A stored value is not finite in the reader's precision (an `f64`
+    /// beyond `f32`'s range read as `f32`).
+    OutOfRange,
+    /// The stored soft iron `W` is singular in the reader's precision.
+    Singular,
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::Truncated => f.write_str("stored calibration is truncated"),
+            Error::BadMagic => f.write_str("stored bytes are not a calibration (bad magic)"),
+            Error::UnsupportedVersion { found } => {
+                write!(
+                    f,
+                    "stored calibration has unsupported format version {found}"
+                )
+            }
+            Error::ChecksumMismatch => f.write_str("stored calibration fails its checksum"),
+            Error::OutOfRange => f.write_str(
+                "stored calibration has a value beyond the range of the reader's precision",
+            ),
+            Error::Singular => {
+                f.write_str("stored calibration's soft iron is singular in the reader's precision")
+            }
+        }
+    }
+}
+
+impl core::error::Error for Error {}
 
 /// The first four bytes of a stored calibration.
 pub const MAGIC: [u8; 4] = *b"MCAL";
@@ -208,12 +264,12 @@ impl Reader<'_> {
 ///   precision, or a `W` that is not positive definite;
 /// - in the reader's precision: [`Error::OutOfRange`] when a value is not
 ///   finite in `T` (an `f64` beyond `f32`'s range read as `f32` becomes
-///   infinite, never a panic), [`Error::SingularSystem`] when `W` is
-///   singular in `T`.
+///   infinite, never a panic), [`Error::Singular`] when `W` is singular in
+///   `T`.
 ///
 /// ```
-/// use mag_cal_core::{Calibration, Error};
-/// use mag_cal_core::persist::{from_bytes, to_bytes};
+/// use mag_cal_core::Calibration;
+/// use mag_cal_core::persist::{from_bytes, to_bytes, Error};
 ///
 /// let half = [[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]];
 /// let cal = Calibration::<f32>::new([1.0, 2.0, 3.0], half)?;
@@ -222,7 +278,7 @@ impl Reader<'_> {
 /// assert_eq!(from_bytes::<f32>(&bytes[..50]), Err(Error::Truncated));
 /// bytes[40] ^= 0x10;
 /// assert_eq!(from_bytes::<f32>(&bytes), Err(Error::ChecksumMismatch));
-/// # Ok::<(), mag_cal_core::Error>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn from_bytes<T: Real>(bytes: &[u8]) -> Result<Calibration<T>, Error> {
     let record = bytes.first_chunk::<ENCODED_LEN>().ok_or(Error::Truncated)?;
@@ -259,7 +315,12 @@ pub fn from_bytes<T: Real>(bytes: &[u8]) -> Result<Calibration<T>, Error> {
     // W was checked symmetric positive definite above, in f64: it is the
     // canonical form itself, so it is kept as stored (an exact round trip in
     // f64) rather than re-derived from W^T W.
-    Calibration::from_canonical(b, w)
+    Calibration::from_canonical(b, w).map_err(|e| match e {
+        // The two failures of its checks: a value not finite in `T`, a
+        // singular `W`.
+        crate::Error::OutOfRange => Error::OutOfRange,
+        _ => Error::Singular,
+    })
 }
 
 /// Checks, in `f64` on the stored values, that the symmetric `W` is

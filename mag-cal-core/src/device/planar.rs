@@ -52,18 +52,107 @@
 //! // The hard iron in the plane (x, y here) is found; z is not observable.
 //! let centre = cal.centre();
 //! assert!((centre[0] - 40.0).abs() < 0.1 && (centre[1] + 25.0).abs() < 0.1);
-//! # Ok::<(), mag_cal_core::Error>(())
+//! # Ok::<(), mag_cal_core::planar::Error>(())
 //! ```
 
+use core::fmt;
+
 use crate::device::heading::{atan2_deg, wrap_deg};
+use crate::error::{Shown, Versus};
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
-use crate::robust::screen::screen;
+use crate::robust::screen::{screen, Unscreened};
 use crate::sample::Sample;
 use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
 use crate::steps::normalize::{scan, MIN_SAMPLES};
 use crate::steps::rules::{pieces, Drops, Gate};
-use crate::{Error, Figure, Real, CLEAN_LIMIT};
+use crate::{Error as FitError, Figure, Real, CLEAN_LIMIT};
+
+/// Why a planar fit was refused: the refusals of its own, or one it shares
+/// with the three-dimensional fit.
+///
+/// Small and `Copy`, as the fit's [`crate::Error`], whose message a shared
+/// refusal prints as it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// A refusal or failure of the steps shared with the three-dimensional
+    /// fit: [`crate::Error::TooFewSamples`],
+    /// [`crate::Error::AllSamplesEqual`], [`crate::Error::OutOfRange`],
+    /// [`crate::Error::SingularSystem`], [`crate::Error::NoSphere`] (more
+    /// than half the rows on one point), [`crate::Error::TooManyOutliers`].
+    Fit(FitError),
+    /// The samples do not lie near one plane; the device turned about more
+    /// than one axis.
+    NotPlanar {
+        /// Smallest over largest eigenvalue of the samples' covariance.
+        flatness: Figure,
+        /// The limit it exceeds.
+        limit: Figure,
+    },
+    /// The samples in their plane do not lie on an ellipse (robust fit
+    /// error too large, or a conic that is not an ellipse, given as
+    /// infinity).
+    NoEllipse {
+        /// Robust fit error (standard deviation of `|u| - 1`).
+        fit_error: Figure,
+        /// The limit it exceeds.
+        limit: Figure,
+    },
+    /// The turns cover too little of the circle.
+    ShortArc {
+        /// Sectors of 30 deg of turn angle that hold samples.
+        sectors: u8,
+        /// Sectors required.
+        required: u8,
+    },
+}
+
+impl From<FitError> for Error {
+    fn from(e: FitError) -> Self {
+        Error::Fit(e)
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::Fit(e) => e.fmt(f),
+            Error::NotPlanar { flatness, limit } => write!(
+                f,
+                "the samples do not lie in a plane (flatness {}): \
+                 the device turned about more than one axis; use the three-dimensional calibration",
+                Versus::new(flatness, limit, ""),
+            ),
+            Error::NoEllipse { fit_error, limit } if !fit_error.get().is_finite() => write!(
+                f,
+                "the samples in their plane do not lie on an ellipse (the fitted conic is not one; fit error limit {}): \
+                 the device did not turn, or these are not one magnetometer's readings",
+                Shown::alone(limit.get()),
+            ),
+            Error::NoEllipse { fit_error, limit } => write!(
+                f,
+                "the samples in their plane do not lie on an ellipse (fit error {}, in units of the field in the plane): \
+                 the device did not turn, tilted by more than a few degrees while turning, or these are not one magnetometer's readings",
+                Versus::new(fit_error, limit, ""),
+            ),
+            Error::ShortArc { sectors, required } => write!(
+                f,
+                "the turns cover {sectors} of 12 sectors of 30 deg, at least {required} required: turn through a full circle"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for Error {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Error::Fit(e) => Some(e),
+            _ => None,
+        }
+    }
+}
 
 /// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
 /// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
@@ -96,7 +185,7 @@ pub struct PlanarThresholds {
     /// Fewer sectors than this: [`Error::ShortArc`].
     pub min_sectors: u8,
     /// Share of the rules' rows screened out or rejected above this:
-    /// [`Error::TooManyOutliers`].
+    /// [`crate::Error::TooManyOutliers`].
     pub refuse_outlier_share: f32,
 }
 
@@ -169,14 +258,14 @@ impl<T: Real> PlanarCalibration<T> {
     /// 2x3 matrix `K` by rows and the angle of heading 0, in degrees.
     ///
     /// # Errors
-    /// [`Error::OutOfRange`] for a non-finite part or an axis that is not
-    /// of unit length (to 1e-3).
+    /// [`crate::Error::OutOfRange`] for a non-finite part or an axis that
+    /// is not of unit length (to 1e-3).
     pub fn new(
         axis: [T; 3],
         centre: [T; 3],
         matrix: [[T; 3]; 2],
         zero_deg: T,
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, FitError> {
         let finite = axis
             .iter()
             .chain(centre.iter())
@@ -192,7 +281,7 @@ impl<T: Real> PlanarCalibration<T> {
                 zero_deg: wrap_deg(zero_deg),
             })
         } else {
-            Err(Error::OutOfRange)
+            Err(FitError::OutOfRange)
         }
     }
 
@@ -265,8 +354,8 @@ impl<T: Real> PlanarCalibration<T> {
     /// heading `heading_deg` (one reading at a known heading aligns it).
     ///
     /// # Errors
-    /// [`Error::OutOfRange`] for a non-finite heading.
-    pub fn aligned<S: Sample>(&self, sample: S, heading_deg: T) -> Result<Self, Error> {
+    /// [`crate::Error::OutOfRange`] for a non-finite heading.
+    pub fn aligned<S: Sample>(&self, sample: S, heading_deg: T) -> Result<Self, FitError> {
         let zero = self.turn_angle_deg(sample) - heading_deg;
         Self::new(self.axis, self.centre, self.matrix, zero)
     }
@@ -317,15 +406,24 @@ pub struct PlanarFit<T: Real> {
 ///
 /// # Errors
 /// The rules' and screening's refusals of the three-dimensional fit
-/// ([`Error::TooFewSamples`], [`Error::AllSamplesEqual`], ...), and from
-/// [`judge`]: [`Error::NotPlanar`], [`Error::NoEllipse`],
-/// [`Error::ShortArc`], [`Error::TooManyOutliers`].
+/// ([`Error::Fit`]: too few samples, all equal, ...), and from [`judge`]:
+/// [`Error::NotPlanar`], [`Error::NoEllipse`], [`Error::ShortArc`], too
+/// many outliers.
 pub fn calibrate_planar<T: Real, S: Sample>(
     samples: &[S],
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
     let scanned = scan::<T, S>(samples, true)?;
-    let screening = screen(samples, &scanned, config.thresholds.refuse_fit_error)?;
+    let screening = match screen(samples, &scanned) {
+        Ok(s) => s,
+        Err(Unscreened::AllEqual) => return Err(FitError::AllSamplesEqual.into()),
+        Err(Unscreened::Crowded) => {
+            return Err(Error::Fit(FitError::NoSphere {
+                fit_error: Figure::new(f32::INFINITY),
+                limit: Figure::new(config.thresholds.refuse_fit_error),
+            }))
+        }
+    };
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
@@ -357,10 +455,11 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     });
     passes += 1;
     if n < MIN_SAMPLES {
-        return Err(Error::TooFewSamples {
+        return Err(FitError::TooFewSamples {
             found: n,
             required: MIN_SAMPLES,
-        });
+        }
+        .into());
     }
     let inv_n = T::one() / T::from_count(n);
     let mean = s1.map(|s| s * inv_n);
@@ -374,7 +473,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let (lo, hi) = (eig.argmin(), eig.argmax());
     let largest = eig.values.get(hi).copied().unwrap_or(T::zero());
     if !(largest > T::zero()) {
-        return Err(Error::AllSamplesEqual);
+        return Err(FitError::AllSamplesEqual.into());
     }
     let flatness = larger(eig.values.get(lo).copied().unwrap_or(T::zero()), T::zero()) / largest;
     let up = config.up.map(T::lit);
@@ -495,18 +594,19 @@ pub fn calibrate_planar<T: Real, S: Sample>(
 /// rules kept.
 ///
 /// # Errors
-/// [`Error::TooFewSamples`], [`Error::NotPlanar`], [`Error::NoEllipse`],
-/// [`Error::TooManyOutliers`], [`Error::ShortArc`], in that order.
+/// In that order: too few samples ([`crate::Error::TooFewSamples`]),
+/// [`Error::NotPlanar`], [`Error::NoEllipse`], too many outliers
+/// ([`crate::Error::TooManyOutliers`]), [`Error::ShortArc`].
 pub fn judge<T: Real>(
     report: &PlanarReport<T>,
     valid: usize,
     th: &PlanarThresholds,
 ) -> Result<(), Error> {
     if report.samples_used < MIN_SAMPLES {
-        return Err(Error::TooFewSamples {
+        return Err(Error::Fit(FitError::TooFewSamples {
             found: report.samples_used,
             required: MIN_SAMPLES,
-        });
+        }));
     }
     if !(report.flatness.to_single() <= th.refuse_not_planar) {
         return Err(Error::NotPlanar {
@@ -522,11 +622,11 @@ pub fn judge<T: Real>(
     }
     let out = report.screened + report.rejected;
     if valid > 0 && out as f32 > th.refuse_outlier_share * valid as f32 {
-        return Err(Error::TooManyOutliers {
+        return Err(Error::Fit(FitError::TooManyOutliers {
             rejected: out,
             valid,
             limit: Figure::new(th.refuse_outlier_share),
-        });
+        }));
     }
     if report.sectors < th.min_sectors {
         return Err(Error::ShortArc {
@@ -618,14 +718,15 @@ fn conic_fit<T: Real, S: Sample>(
         }
     });
     if kept < MIN_SAMPLES {
-        return Err(Error::TooFewSamples {
+        return Err(FitError::TooFewSamples {
             found: kept,
             required: MIN_SAMPLES,
-        });
+        }
+        .into());
     }
     let phi = cholesky(&a5)
         .map(|l| cholesky_solve(&l, &r5))
-        .ok_or(Error::SingularSystem)?;
+        .ok_or(FitError::SingularSystem)?;
     ellipse(&phi).ok_or(Error::NoEllipse {
         fit_error: Figure::new(f32::INFINITY),
         limit: Figure::new(config.thresholds.refuse_fit_error),
@@ -765,14 +866,14 @@ impl<T: Real> AdcSums<T> {
     }
 
     /// `W2 = (T2 T2^T)^(-1/2)` and `c2 = beta`.
-    fn solve(&self) -> Result<Ellipse<T>, Error> {
+    fn solve(&self) -> Result<Ellipse<T>, FitError> {
         if !(self.gg[2][2] >= T::from_count(MIN_SAMPLES)) {
-            return Err(Error::TooFewSamples {
+            return Err(FitError::TooFewSamples {
                 found: self.gg[2][2].to_count(),
                 required: MIN_SAMPLES,
             });
         }
-        let l = cholesky(&self.gg).ok_or(Error::SingularSystem)?;
+        let l = cholesky(&self.gg).ok_or(FitError::SingularSystem)?;
         // Each row of [T2 | beta] solves (sum x x^T) t = sum p_r x.
         let r0 = cholesky_solve(&l, &self.pg[0]);
         let r1 = cholesky_solve(&l, &self.pg[1]);
@@ -788,10 +889,10 @@ impl<T: Real> AdcSums<T> {
             ],
         ];
         // (T2 T2^T)^(-1/2) = inverse of its square root.
-        let s = sqrt2(&tt).ok_or(Error::SingularSystem)?;
+        let s = sqrt2(&tt).ok_or(FitError::SingularSystem)?;
         let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
         if !(det > T::zero()) || !det.is_finite() {
-            return Err(Error::SingularSystem);
+            return Err(FitError::SingularSystem);
         }
         let w = [
             [s[1][1] / det, -s[0][1] / det],

@@ -342,9 +342,11 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
             limit: Figure::new(th.refuse_flatness),
         });
     }
+    // An infinite fit error (no sphere at all: rows crowded on one point)
+    // refuses whatever the limit.
     if let Some(e) = f
         .fit_error
-        .filter(|_| above(f.fit_error, th.refuse_fit_error))
+        .filter(|e| above(f.fit_error, th.refuse_fit_error) || !e.is_finite())
     {
         return Err(Error::NoSphere {
             fit_error: beyond(e, th.refuse_fit_error, true),
@@ -437,6 +439,16 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         w.insert(Warning::HighFitError);
     }
     Ok(w)
+}
+
+/// A step failed with `e`: the figures computed so far may explain why
+/// (planar data, a cloud that is no shell, rows crowded on one point); if
+/// [`judge`] refuses them, that refusal is the answer, else `e`.
+pub(crate) fn judge_failure<T: Real>(f: &Figures<T>, th: &Thresholds, e: Error) -> Error {
+    match judge(f, th) {
+        Err(refusal) => refusal,
+        Ok(_) => e,
+    }
 }
 
 /// `v` as a [`Figure`] beyond `limit` on the side it was judged on

@@ -172,14 +172,9 @@ pub(super) fn finish<T: Real, S: Sample>(
     })
 }
 
-/// A step failed with `e`: the figures computed so far may explain why
-/// (planar data, a cloud that is no shell); if they refuse, that refusal is
-/// the answer, else `e`.
+/// [`quality::judge_failure`] with the caller's thresholds.
 pub(super) fn judge_failure<T: Real>(figures: &Figures<T>, config: &Config, e: Error) -> Error {
-    match quality::judge(figures, &config.thresholds) {
-        Err(refusal) => refusal,
-        Ok(_) => e,
-    }
+    quality::judge_failure(figures, &config.thresholds, e)
 }
 
 impl<T: Real> Figures<T> {

@@ -75,14 +75,35 @@ fn pipeline<T: Real, S: Sample>(
         // A clip level may bend the plain fit unseen: screening finds it.
         return robust_path(samples, config, &scan, ls_solve, step);
     }
-    // The plain result is returned as it is, or not at all: this frame
-    // then holds no second fit under the robust path (224 bytes of stack).
-    let mut clean = false;
-    let plain = plain_path(samples, config, &scan, ls_solve, step, &mut clean);
-    if clean || !config.robust {
-        return plain;
+    // The plain answer is returned as it is, or not at all. It has this
+    // function's own type, so that it goes straight into the caller's slot
+    // and this frame holds no second fit under the robust path (224 bytes
+    // of stack; an `Option` of the answer, or a route in its error, took
+    // 480: the footprint's `measured_call`).
+    let mut route = Route::Robust;
+    let plain = plain_path(samples, config, &scan, ls_solve, step, &mut route);
+    match route {
+        Route::Plain => plain,
+        Route::Robust => robust_path(samples, config, &scan, ls_solve, step),
     }
-    robust_path(samples, config, &scan, ls_solve, step)
+}
+
+/// Whose answer the batch fit returns: the plain path's or the robust
+/// path's. Private to the pipeline: a caller sees a calibration or an
+/// [`Error`], never a route.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Route {
+    /// The plain path's answer, a fit or a refusal: always without outlier
+    /// handling; with it ([`Config::robust`]), when the plain fit is clean.
+    Plain,
+    /// The robust path's: outlier handling is on, and the plain path
+    /// refused, failed, or its fit is not clean: gross outliers in the
+    /// moments ([`normalize::GROSS_KURTOSIS`]), residuals with heavy tails
+    /// or pulled inwards in the method's first pass ([`CLEAN_KURTOSIS`],
+    /// [`CLEAN_SKEWNESS`]), a residual beyond [`CLEAN_LIMIT`] robust
+    /// sigmas, an RMS beyond [`CLEAN_TAIL`] of them, a lack of fit beyond
+    /// its limit, or an LS fit misshapen beyond [`CLEAN_SHAPE`].
+    Robust,
 }
 
 /// What the steps before the method leave for it and for the judging.

@@ -45,9 +45,19 @@ pub const CLEAN_SKEWNESS: f64 = 1.0;
 /// above 0.44.
 pub const CLEAN_SHAPE: f64 = 0.3;
 
-/// The plain pipeline: every row the scan kept, weight 1. Returns the fit
-/// and sets `clean` when it is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::CLEAN_TAIL)). Out of line, as the robust
-/// path: inlined, both paths' locals would share `pipeline`'s frame.
+/// What [`plain_path`] returns when the robust path answers
+/// ([`Route::Robust`]) and the plain path has no refusal of its own to
+/// return: no answer, a value of the answer's type only, which `pipeline`
+/// drops. (The answer's own type keeps the plain fit in the caller's slot;
+/// see `pipeline`.)
+const NOT_TAKEN: Error = Error::NoConvergence { iterations: 0 };
+
+/// The plain pipeline: every row the scan kept, weight 1. Its answer, the
+/// fit or a refusal, stands without outlier handling; with it, only when
+/// the fit is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::CLEAN_TAIL)):
+/// `route` is then set to [`Route::Plain`], else left as the caller set it
+/// ([`Route::Robust`]). Out of line, as the robust path: inlined, both
+/// paths' locals would share `pipeline`'s frame.
 #[inline(never)]
 pub(super) fn plain_path<T: Real, S: Sample>(
     samples: &[S],
@@ -55,11 +65,19 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
-    clean: &mut bool,
+    route: &mut Route,
 ) -> Result<Fit<T>, Error> {
+    if !config.robust {
+        *route = Route::Plain;
+    }
     let mut figures = Figures::new(scan, config, false);
     let start = plain_start(samples, config, scan, ls_solve, &mut figures)?;
     let est = method_step(samples, config, &start, step, &figures)?;
+    if est.beyond_tails_limit {
+        // The method's first pass found heavy tails, or rows pulled
+        // inwards (only with outlier handling, which sets the limit).
+        return Err(NOT_TAKEN);
+    }
     let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
     let method_clean = est
         .max_residual
@@ -68,7 +86,7 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     if config.robust && !method_clean {
         // Not clean, and this fit will not be returned: no final pass
         // (about 120 instructions a row on a Cortex-M4F).
-        return Err(Error::OutOfRange);
+        return Err(NOT_TAKEN);
     }
     let done = finish(samples, config, &start, &est, &mut figures)?;
     let fit = done.fit;
@@ -80,7 +98,9 @@ pub(super) fn plain_path<T: Real, S: Sample>(
         && !done.heavy_tails
         && !done.misfit
         && !done.misshapen;
-    *clean = is_clean;
+    if is_clean {
+        *route = Route::Plain;
+    }
     Ok(fit)
 }
 
@@ -104,8 +124,9 @@ pub(super) fn plain_start<T: Real, S: Sample>(
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
-        // Gross outliers: not worth a plain fit (the caller screens).
-        return Err(Error::OutOfRange);
+        // Gross outliers: not worth a plain fit (the robust path screens;
+        // the route is left to it).
+        return Err(NOT_TAKEN);
     }
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {

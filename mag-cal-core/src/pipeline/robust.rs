@@ -91,7 +91,7 @@ pub(super) fn best_start<T: Real, S: Sample>(
     passes: &mut u32,
 ) -> Option<usize> {
     // The screening does not depend on the start: made once for all.
-    let screening = screen::screen(samples, scan, config.thresholds.refuse_fit_error).ok()?;
+    let screening = screen::screen(samples, scan).ok()?;
     *passes = passes.saturating_add(screening.passes);
     // The start that scores best, and its score.
     let mut best: Option<(usize, T)> = None;
@@ -236,7 +236,16 @@ pub(super) fn robust_start<'r, T: Real, S: Sample>(
     runs: &'r mut runs::Runs,
     k: usize,
 ) -> Result<Start<'r, T>, Error> {
-    let screening = screen::screen(samples, scan, config.thresholds.refuse_fit_error)?;
+    let screening = match screen::screen(samples, scan) {
+        Ok(s) => s,
+        Err(screen::Unscreened::AllEqual) => return Err(Error::AllSamplesEqual),
+        Err(screen::Unscreened::Crowded) => {
+            // No sphere at all: judged by the crude sphere's fit error,
+            // infinite, which the judging always refuses.
+            figures.fit_error = Some(T::lit(f64::INFINITY));
+            return Err(judge_failure(figures, config, Error::AllSamplesEqual));
+        }
+    };
     let passes = screening.passes;
     start_from(
         samples, config, &screening, passes, ls_solve, figures, runs, k,

@@ -46,7 +46,7 @@ use crate::steps::normalize::{Normalization, Scan};
 use crate::steps::rules::{
     check, count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE,
 };
-use crate::{Error, Real};
+use crate::Real;
 
 /// Samples farther from the median centre than this many median distances
 /// are screened out. A sphere's samples lie at most 1 median distance (plus
@@ -226,22 +226,33 @@ pub(crate) struct Screening<T: Real> {
     pub passes: u32,
 }
 
+/// Why screening found no sphere to screen by (crate-private: the caller
+/// turns it into a [`crate::Error`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Unscreened {
+    /// No spread: most rows share each axis's value
+    /// ([`crate::Error::AllSamplesEqual`]).
+    AllEqual,
+    /// More than half the rows sit on the median centre: the crude
+    /// sphere's fit error is infinite, a figure for the judging (which
+    /// refuses it as [`crate::Error::NoSphere`] with the caller's limit).
+    Crowded,
+}
+
 /// Screens the rows the scan's rules keep. Out of line: its histograms
-/// take stack only while it runs. `refuse_fit_error` is the caller's limit
-/// of the fit error, which the refusal of rows crowded on one point names.
+/// take stack only while it runs.
 #[inline(never)]
 pub(crate) fn screen<T: Real, S: Sample>(
     samples: &[S],
     scan: &Scan<T>,
-    refuse_fit_error: f32,
-) -> Result<Screening<T>, Error> {
+) -> Result<Screening<T>, Unscreened> {
     let (centre, spread, rules, mut passes) = median_centre(samples, scan);
     let gate = Gate {
         rules,
         screen: None,
     };
     if !(spread > T::zero()) || !spread.is_finite() {
-        return Err(Error::AllSamplesEqual);
+        return Err(Unscreened::AllEqual);
     }
     // Median distance, on the scale of the spread (the mean inter-quartile
     // range: a sphere's radius).
@@ -262,10 +273,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     let rows_near = dist.count_below(near * near);
     if !(m > T::zero()) || !m.is_finite() {
         // More than half the rows sit on the median centre.
-        return Err(Error::NoSphere {
-            fit_error: crate::Figure::new(f32::INFINITY),
-            limit: crate::Figure::new(refuse_fit_error),
-        });
+        return Err(Unscreened::Crowded);
     }
     // The median centre follows the device's dwell: samples crowded on one
     // side of the sphere put it near that side, and the far side beyond
@@ -854,7 +862,7 @@ mod tests {
             [v[0] + 150, v[1] - 80, v[2] + 20]
         });
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let clean = screen(&rows, &s, crate::judge::quality::REFUSE_FIT_ERROR as f32).unwrap();
+        let clean = screen(&rows, &s).unwrap();
         assert_eq!(clean.drops.clipped, 0);
         let mut clipped = 0;
         let mut beyond = 0;
@@ -867,7 +875,7 @@ mod tests {
         }
         assert!(clipped > 40, "{clipped}");
         let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let dirty = screen(&rows, &s, crate::judge::quality::REFUSE_FIT_ERROR as f32).unwrap();
+        let dirty = screen(&rows, &s).unwrap();
         assert_eq!(dirty.rules.clip[0][1], 470.0);
         // The clipped rows, and the clean rows that were at 470 already.
         let at = rows.iter().filter(|r| r[0] == 470).count();

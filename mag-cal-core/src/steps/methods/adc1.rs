@@ -132,7 +132,10 @@ pub(crate) fn step<T: Real, S: Sample>(
     config: &Config,
     weights: &Weights<T>,
 ) -> Result<Estimate<T>, Error> {
-    let (stats, sigma, max) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?;
+    let Some((stats, sigma, max)) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?
+    else {
+        return Ok(Estimate::beyond_tails_limit(ls));
+    };
     let m = weighted_solve(&stats, norm, config)?;
     let th = theta(&m.x);
     let (dt, db) = split(&th);
@@ -146,5 +149,6 @@ pub(crate) fn step<T: Real, S: Sample>(
         directions: Some(DirectionSums::from(&stats)),
         sigma,
         max_residual: Some(max),
+        beyond_tails_limit: false,
     })
 }

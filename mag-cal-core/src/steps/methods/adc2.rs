@@ -200,7 +200,10 @@ pub(crate) fn step<T: Real, S: Sample>(
     config: &Config,
     weights: &Weights<T>,
 ) -> Result<Estimate<T>, Error> {
-    let (stats, sigma, max) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?;
+    let Some((stats, sigma, max)) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?
+    else {
+        return Ok(Estimate::beyond_tails_limit(ls));
+    };
     let sol = solve(&stats, &ls.t, &ls.centre, config.max_iterations)?;
     Ok(Estimate {
         centre: sol.centre,
@@ -211,6 +214,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         directions: Some(DirectionSums::from(&stats)),
         sigma,
         max_residual: Some(max),
+        beyond_tails_limit: false,
     })
 }
 

@@ -68,6 +68,10 @@ fn unpack<T: Real>(x: &State<T>) -> (Matrix3<T>, Vector3<T>) {
     (w, Vector3::new(x[6], x[7], x[8]))
 }
 
+/// A step of the map: the new state, the robust sigma and the largest
+/// residual of its pass.
+type Stepped<T> = (State<T>, Option<T>, T);
+
 /// One plain step of the map: `(W', b') -> (W'_new, b'_new)`. The inner
 /// solve is ADC2's closed form: near the fixed point the whole correction
 /// is of the order of BFGS's 1e-6 step test, and a solve stopped there made
@@ -75,19 +79,22 @@ fn unpack<T: Real>(x: &State<T>) -> (Matrix3<T>, Vector3<T>) {
 ///
 /// With weights, the pass leaves out the rows they reject, and returns the
 /// robust sigma and largest residual of its own residuals: the next pass's
-/// weights.
+/// weights. `None` when the pass's residuals lie beyond
+/// [`Weights::tails_limit`].
 fn adc2_step<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,
     x: &State<T>,
     weights: &Weights<T>,
-) -> Result<(State<T>, Option<T>, T), Error> {
+) -> Result<Option<Stepped<T>>, Error> {
     let (w, b) = unpack(x);
     let t0 = inverse(&w)?;
-    let (stats, sigma, max) = weighted_stats(samples, norm, &b, &w, weights)?;
+    let Some((stats, sigma, max)) = weighted_stats(samples, norm, &b, &w, weights)? else {
+        return Ok(None);
+    };
     let sol = adc2::solve_closed_form(&stats, &t0, &b)?;
     let w_new = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
-    Ok((pack(&w_new, &sol.centre), sigma, max))
+    Ok(Some((pack(&w_new, &sol.centre), sigma, max)))
 }
 
 /// The gauge-free size of a change from `a` to `b`:
@@ -126,7 +133,9 @@ pub(crate) fn step<T: Real, S: Sample>(
     let mut max_residual = None;
     let mut sigma = None;
     while passes < config.max_passes {
-        let (g, pass_sigma, pass_max) = adc2_step(samples, norm, &x, &weights)?;
+        let Some((g, pass_sigma, pass_max)) = adc2_step(samples, norm, &x, &weights)? else {
+            return Ok(Estimate::beyond_tails_limit(ls));
+        };
         passes += 1;
         last = g;
         (sigma, max_residual) = (pass_sigma, Some(pass_max));
@@ -144,6 +153,7 @@ pub(crate) fn step<T: Real, S: Sample>(
                 directions: None,
                 sigma,
                 max_residual,
+                beyond_tails_limit: false,
             });
         }
         let next = accel.step(&x, &g);
@@ -168,6 +178,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         directions: None,
         sigma,
         max_residual,
+        beyond_tails_limit: false,
     })
 }
 

@@ -124,12 +124,15 @@ pub(crate) fn ls_only<T: Real, S: Sample>(
     _config: &Config,
     weights: &Weights<T>,
 ) -> Result<Estimate<T>, Error> {
-    let mut est = Estimate::from_ellipsoid(ls);
-    if weights.tails_limit.is_some() {
-        let (stats, _, _) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)?;
-        est.passes = 1;
-        est.directions = Some(DirectionSums::from(&stats));
+    if weights.tails_limit.is_none() {
+        return Ok(Estimate::from_ellipsoid(ls));
     }
+    let Some((stats, _, _)) = weighted_stats(samples, norm, &ls.centre, &ls.w, weights)? else {
+        return Ok(Estimate::beyond_tails_limit(ls));
+    };
+    let mut est = Estimate::from_ellipsoid(ls);
+    est.passes = 1;
+    est.directions = Some(DirectionSums::from(&stats));
     Ok(est)
 }
 
@@ -148,9 +151,10 @@ pub(crate) struct Weights<'r, T: Real> {
     /// (from the previous pass: the weights lag one pass).
     pub sigma: Option<T>,
     /// A plain pass whose residuals' kurtosis exceeds the first, or whose
-    /// skewness is below minus the second, ends the method with an
-    /// error (the robust path follows; see [`crate::CLEAN_KURTOSIS`] and
-    /// [`crate::CLEAN_SKEWNESS`]).
+    /// skewness is below minus the second, ends the method before its
+    /// solve ([`Estimate::beyond_tails_limit`]): the plain fit is not
+    /// clean, and the robust path follows (see [`crate::CLEAN_KURTOSIS`]
+    /// and [`crate::CLEAN_SKEWNESS`]).
     pub tails_limit: Option<(T, T)>,
 }
 
@@ -189,17 +193,23 @@ impl<T: Real> Weights<'_, T> {
 /// 3.5 sigma at most 2.2 % (measured in simulation).
 pub const OUTLIER_CUT: f64 = 3.5;
 
+/// What an artificial-data pass gives a method: the statistics, the
+/// robust sigma of the residuals and the largest residual.
+pub(crate) type PassStats<T> = (Stats<T>, Option<T>, T);
+
 /// The artificial-data pass under the start `(centre, w)` with the 0/1
 /// weights: the statistics, the robust sigma of the residuals of the rows
 /// the gate passed (`None` for the plain pass, which does not measure
-/// them), and the largest residual (0 for the plain pass).
+/// them), and the largest residual (0 for the plain pass). `None` when the
+/// pass is plain and its residuals lie beyond [`Weights::tails_limit`]:
+/// the method then stops ([`Estimate::beyond_tails_limit`]).
 pub(crate) fn weighted_stats<T: Real, S: Sample>(
     samples: &[S],
     norm: &Normalization<T>,
     centre: &Vector3<T>,
     w: &Matrix3<T>,
     weights: &Weights<T>,
-) -> Result<(Stats<T>, Option<T>, T), Error> {
+) -> Result<Option<PassStats<T>>, Error> {
     if weights.gate.is_plain() && weights.sigma.is_none() {
         let (stats, tails) = Stats::accumulate_plain(samples, norm, centre, w)?;
         let outside =
@@ -207,16 +217,17 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
         if weights.tails_limit.is_some_and(outside) {
             // Heavy tails, or rows pulled inwards: this plain fit will not be
             // taken.
-            return Err(Error::OutOfRange);
+            return Ok(None);
         }
-        return Ok((stats, None, T::zero()));
+        return Ok(Some((stats, None, T::zero())));
     }
+    // A tail call: this frame is gone while the measured pass runs.
     measured_stats(samples, norm, centre, w, weights)
 }
 
-/// [`weighted_stats`] of a gated or weighted pass. Out of line: the
-/// residuals' histogram takes stack only while it runs, not on the plain
-/// path.
+/// [`weighted_stats`] of a gated or weighted pass (never `None`: only a
+/// plain pass has a tails limit). Out of line: the residuals' histogram
+/// takes stack only while it runs, not on the plain path.
 #[inline(never)]
 fn measured_stats<T: Real, S: Sample>(
     samples: &[S],
@@ -224,7 +235,7 @@ fn measured_stats<T: Real, S: Sample>(
     centre: &Vector3<T>,
     w: &Matrix3<T>,
     weights: &Weights<T>,
-) -> Result<(Stats<T>, Option<T>, T), Error> {
+) -> Result<Option<PassStats<T>>, Error> {
     let mut res = Residuals::new();
     let pass = Pass {
         gate: &weights.gate,
@@ -232,7 +243,7 @@ fn measured_stats<T: Real, S: Sample>(
         limit: weights.limit(),
     };
     let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
-    Ok((stats, robust_sigma(&res.hist), res.max))
+    Ok(Some((stats, robust_sigma(&res.hist), res.max)))
 }
 
 /// The robust standard deviation `1.4826 median|r|` of the residuals
@@ -272,6 +283,11 @@ pub struct Estimate<T: Real> {
     pub sigma: Option<T>,
     /// The largest radial residual in that pass.
     pub max_residual: Option<T>,
+    /// The method stopped after a plain pass whose residuals lie beyond
+    /// [`Weights::tails_limit`], before its solve: the estimate is the LS
+    /// fit it started from, and the plain fit is not clean (the plain path
+    /// routes to the robust path; never set without a tails limit).
+    pub(crate) beyond_tails_limit: bool,
 }
 
 impl<T: Real> Estimate<T> {
@@ -286,6 +302,15 @@ impl<T: Real> Estimate<T> {
             directions: None,
             sigma: None,
             max_residual: None,
+            beyond_tails_limit: false,
+        }
+    }
+
+    /// The LS fit `e`, from a method stopped by [`Weights::tails_limit`].
+    pub(crate) fn beyond_tails_limit(e: &Ellipsoid<T>) -> Self {
+        Self {
+            beyond_tails_limit: true,
+            ..Self::from_ellipsoid(e)
         }
     }
 }

@@ -155,6 +155,7 @@ pub(crate) fn step<T: Real, S: Sample>(
         directions: None,
         sigma: None,
         max_residual: None,
+        beyond_tails_limit: false,
     })
 }
 
