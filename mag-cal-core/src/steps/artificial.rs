@@ -479,7 +479,9 @@ fn directions<T: Real, S: Sample>(
     let mut max = res.max;
     let hist = &mut res.hist;
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
-        let row = pass.gate.pass(sample, last);
+        // Inlined: under the robust path this loop runs at the deepest
+        // stack of the fit.
+        let row = pass.gate.pass_inlined(sample, last);
         last = Some(sample);
         *slot = [T::zero(); 4];
         let Some(y) = row else {
