@@ -63,6 +63,13 @@ pub trait Real:
     /// `1 / libm::sqrt(x)`. The result for zero, negative, subnormal or
     /// non-finite `x` is unspecified (but never a panic): callers check.
     fn rsqrt(self) -> Self;
+    /// The square root, correctly rounded (IEEE 754): nalgebra's
+    /// `ComplexField::sqrt`, except for `f32` on a hard-float ARM target
+    /// (Cortex-M4F and up), which takes the FPU's `VSQRT`. Both round
+    /// correctly, so the results are the same; in `no_std` the former is
+    /// libm's software `sqrtf` (about 90 instructions a call on a
+    /// Cortex-M4F, and 480 bytes of flash with its table).
+    fn square_root(self) -> Self;
     /// The cube root of a positive normal `x` (`f32`: relative error below
     /// 2.5e-7, 2 ulp).
     ///
@@ -124,6 +131,16 @@ impl Real for f32 {
         y
     }
     #[inline]
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    fn square_root(self) -> Self {
+        vsqrt(self)
+    }
+    #[inline]
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    fn square_root(self) -> Self {
+        nalgebra::ComplexField::sqrt(self)
+    }
+    #[inline]
     fn positive_cbrt(self) -> Self {
         // Exponent divided by 3 in the bits (relative error below 4 %),
         // then Newton on y^3 = x: 4e-2 -> 2e-3 -> 4e-6 -> rounding.
@@ -172,6 +189,10 @@ impl Real for f64 {
         1.0 / libm::sqrt(self)
     }
     #[inline]
+    fn square_root(self) -> Self {
+        nalgebra::ComplexField::sqrt(self)
+    }
+    #[inline]
     fn positive_cbrt(self) -> Self {
         libm::cbrt(self)
     }
@@ -187,6 +208,9 @@ impl Real for f64 {
 /// samples: 425 080 -> 399 160 instructions under `cargo xtask bench`;
 /// in cycles, by the Cortex-M4 manual's figures, 14 for `VSQRT` against
 /// about 30 for the dependent Newton steps: an estimate, not measured).
+/// [`Real::square_root`] takes it too: with it, libm's `sqrtf` is not
+/// linked (LS9 + ADC2 flash 42 616 -> 42 200 bytes, `bench.sh
+/// footprint`).
 #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
 #[allow(unsafe_code)]
 #[inline(always)]

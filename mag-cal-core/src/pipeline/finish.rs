@@ -81,7 +81,9 @@ pub(super) fn finish<T: Real, S: Sample>(
     runs.visit(samples, |s, prev| {
         if let Some(y) = gate.pass(s, prev) {
             spanned += 1;
-            let within = limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l);
+            let within = limit.is_none_or(|l| {
+                (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
+            });
             figures.beside += usize::from(within);
         }
     });
@@ -109,7 +111,7 @@ pub(super) fn finish<T: Real, S: Sample>(
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
-    let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
+    let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
         quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
@@ -188,7 +190,8 @@ impl<T: Real> Figures<T> {
             // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the
             // f32 path.
             let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
-            scan.norm.scale < T::from_single(config.thresholds.warn_spread_over_noise) * var.sqrt()
+            scan.norm.scale
+                < T::from_single(config.thresholds.warn_spread_over_noise) * var.square_root()
         });
         Self::before_fit(
             scan.used,

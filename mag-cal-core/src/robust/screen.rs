@@ -254,7 +254,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     passes += 1;
     let m = dist
         .quantile(T::lit(0.5))
-        .map(|q| q.sqrt() * spread)
+        .map(|q| q.square_root() * spread)
         .unwrap_or(T::zero());
     // Rows within the re-centring radius (the histogram counts squared
     // distances over the spread's square).
@@ -416,7 +416,7 @@ fn recentre<T: Real, S: Sample>(
     }
     let r = dist
         .quantile(T::lit(0.5))
-        .map(|q| q.sqrt() * m)
+        .map(|q| q.square_root() * m)
         .unwrap_or(T::zero());
     let ok = r > T::zero() && r.is_finite() && centre.iter().all(|v| v.is_finite());
     (ok.then_some((centre, r)), 2)

@@ -160,7 +160,7 @@ impl<T: Real> Stats<T> {
         let tails = if s2 > T::zero() {
             Tails {
                 kurtosis: n * s4 / (s2 * s2),
-                skewness: n.sqrt() * s3 / (s2 * s2.sqrt()),
+                skewness: n.square_root() * s3 / (s2 * s2.square_root()),
             }
         } else {
             Tails {
