@@ -109,7 +109,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     }
     figures.field_deviation = config
         .expected_field_strength
-        .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
+        .map(|expected| calibration.field_strength() / T::from_double(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
     let quality = Quality {
@@ -189,7 +189,8 @@ impl<T: Real> Figures<T> {
         let low_spread = config.noise_covariance.is_some_and(|c| {
             // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the
             // f32 path.
-            let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
+            let var = (T::from_double(c[0][0]) + T::from_double(c[1][1]) + T::from_double(c[2][2]))
+                / T::lit(3.0);
             scan.norm.scale
                 < T::from_single(config.thresholds.warn_spread_over_noise) * var.square_root()
         });
