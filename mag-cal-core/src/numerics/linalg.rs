@@ -391,7 +391,7 @@ pub(crate) fn cholesky_in_place<T: Real, const N: usize>(a: &mut Mat<T, N>) -> b
         if !(d > T::zero()) || !d.is_finite() {
             return false;
         }
-        let djj = d.sqrt();
+        let djj = d.square_root();
         a[j][j] = djj;
         for i in (j + 1)..N {
             let mut s = a[i][j];
@@ -542,7 +542,7 @@ fn inv_sqrt<T: Real>(l: T) -> T {
     if l >= T::MIN_POSITIVE {
         l.rsqrt()
     } else {
-        T::one() / l.sqrt()
+        T::one() / l.square_root()
     }
 }
 

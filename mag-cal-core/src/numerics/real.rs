@@ -34,6 +34,12 @@ pub trait Real:
     const MAX: Self;
     /// Converts a constant, rounding to the nearest representable value.
     fn lit(x: f64) -> Self;
+    /// Converts a value computed at run time (a [`crate::Config`] field),
+    /// rounding to the nearest representable value as `lit` does, without
+    /// the soft-float conversion routine on targets without a
+    /// double-precision FPU (`__aeabi_d2f`, 310 bytes on a Cortex-M4F).
+    #[doc(hidden)]
+    fn from_double(x: f64) -> Self;
     /// Widens (or keeps) the value as `f64`, for reporting.
     fn to_f64(self) -> f64;
     /// Converts a count, exactly up to `2^24` (`f32`) or `2^53` (`f64`).
@@ -63,6 +69,13 @@ pub trait Real:
     /// `1 / libm::sqrt(x)`. The result for zero, negative, subnormal or
     /// non-finite `x` is unspecified (but never a panic): callers check.
     fn rsqrt(self) -> Self;
+    /// The square root, correctly rounded (IEEE 754): nalgebra's
+    /// `ComplexField::sqrt`, except for `f32` on a hard-float ARM target
+    /// (Cortex-M4F and up), which takes the FPU's `VSQRT`. Both round
+    /// correctly, so the results are the same; in `no_std` the former is
+    /// libm's software `sqrtf` (about 90 instructions a call on a
+    /// Cortex-M4F, and 480 bytes of flash with its table).
+    fn square_root(self) -> Self;
     /// The cube root of a positive normal `x` (`f32`: relative error below
     /// 2.5e-7, 2 ulp).
     ///
@@ -81,6 +94,10 @@ impl Real for f32 {
     #[inline]
     fn lit(x: f64) -> Self {
         x as f32
+    }
+    #[inline]
+    fn from_double(x: f64) -> Self {
+        narrow(x)
     }
     #[inline]
     fn to_f64(self) -> f64 {
@@ -124,6 +141,16 @@ impl Real for f32 {
         y
     }
     #[inline]
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    fn square_root(self) -> Self {
+        vsqrt(self)
+    }
+    #[inline]
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    fn square_root(self) -> Self {
+        nalgebra::ComplexField::sqrt(self)
+    }
+    #[inline]
     fn positive_cbrt(self) -> Self {
         // Exponent divided by 3 in the bits (relative error below 4 %),
         // then Newton on y^3 = x: 4e-2 -> 2e-3 -> 4e-6 -> rounding.
@@ -141,6 +168,10 @@ impl Real for f64 {
     const MAX: Self = f64::MAX;
     #[inline]
     fn lit(x: f64) -> Self {
+        x
+    }
+    #[inline]
+    fn from_double(x: f64) -> Self {
         x
     }
     #[inline]
@@ -172,9 +203,67 @@ impl Real for f64 {
         1.0 / libm::sqrt(self)
     }
     #[inline]
+    fn square_root(self) -> Self {
+        nalgebra::ComplexField::sqrt(self)
+    }
+    #[inline]
     fn positive_cbrt(self) -> Self {
         libm::cbrt(self)
     }
+}
+
+/// `x as f32` in integer operations: round to nearest, ties to even;
+/// beyond the range infinity, below it a subnormal or zero; NaN stays NaN.
+/// The `as` conversion is a call to the soft-float routine on a
+/// Cortex-M4F (single-precision FPU, `__aeabi_d2f`, 310 bytes of flash);
+/// this is 170 (LS9 + ADC2 flash 41 808 -> 41 648 bytes, `bench.sh
+/// footprint`). Called only with [`crate::Config`] fields, once a fit.
+#[inline(never)]
+fn narrow(x: f64) -> f32 {
+    // In 32-bit halves: 64-bit shifts cost several instructions each on
+    // a Cortex-M.
+    let b = x.to_bits();
+    let (hi, lo) = ((b >> 32) as u32, b as u32);
+    let sign = hi & 0x8000_0000;
+    let exp = (hi >> 20) & 0x7ff;
+    let top = hi & 0x000f_ffff;
+    let magnitude = if exp == 0x7ff {
+        // Infinity, or a quiet NaN with the top of the payload.
+        let payload = top << 3 | lo >> 29;
+        0x7f80_0000
+            | if top | lo == 0 {
+                0
+            } else {
+                0x0040_0000 | payload
+            }
+    } else if exp >= 1023 + 128 {
+        // 2^128 and beyond.
+        0x7f80_0000
+    } else if exp < 1023 - 150 {
+        // Below 2^-150, half the least subnormal: zero.
+        0
+    } else {
+        // The leading bit and 23 more, and the 29 bits below them
+        // (left-aligned: their top bit is the half).
+        let sig = 1 << 23 | top << 3 | lo >> 29;
+        let rest = lo << 3;
+        // The f32 biased exponent, when normal.
+        let e = exp as i32 - (1023 - 127);
+        let (kept, rest, base) = if e > 0 {
+            // The exponent field below the leading bit, which adds one.
+            (sig, rest, ((e - 1) as u32) << 23)
+        } else {
+            // Subnormal: `1 - e` (1 to 24) more bits dropped; below them
+            // only whether any bit is set matters.
+            let shift = (1 - e) as u32;
+            (sig >> shift, sig << (32 - shift) | u32::from(rest != 0), 0)
+        };
+        let up = rest > 0x8000_0000 || (rest == 0x8000_0000 && kept & 1 == 1);
+        // A carry out of the significand moves to the next binade, and
+        // from the largest finite value to infinity.
+        base + kept + u32::from(up)
+    };
+    f32::from_bits(sign | magnitude)
 }
 
 /// The FPU's square root (`VSQRT.F32`, one instruction, 14 cycles on a
@@ -187,6 +276,9 @@ impl Real for f64 {
 /// samples: 425 080 -> 399 160 instructions under `cargo xtask bench`;
 /// in cycles, by the Cortex-M4 manual's figures, 14 for `VSQRT` against
 /// about 30 for the dependent Newton steps: an estimate, not measured).
+/// [`Real::square_root`] takes it too: with it, libm's `sqrtf` is not
+/// linked (LS9 + ADC2 flash 42 616 -> 42 200 bytes, `bench.sh
+/// footprint`).
 #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
 #[allow(unsafe_code)]
 #[inline(always)]
@@ -227,6 +319,76 @@ mod tests {
             x *= 1.37;
         }
         assert!(worst < 3e-7, "{worst}");
+    }
+
+    /// Bit for bit `as f32`, on the edges of every range and on random
+    /// bit patterns (NaN only as NaN).
+    #[test]
+    fn narrow_is_as_f32() {
+        let check = |x: f64| {
+            let (got, want) = (narrow(x), x as f32);
+            if want.is_nan() {
+                assert!(got.is_nan(), "{x:e}");
+            } else {
+                assert_eq!(got.to_bits(), want.to_bits(), "{x:e} ({:#x})", x.to_bits());
+            }
+        };
+        let least = f64::from(f32::from_bits(1));
+        let edges = [
+            0.0,
+            1.0,
+            1.5,
+            f64::from(f32::MAX),
+            f64::from(f32::MAX) * (1.0 + f64::EPSILON),
+            f64::from(f32::MIN_POSITIVE),
+            least,
+            least / 2.0,
+            least / 2.0 * (1.0 + f64::EPSILON),
+            least / 2.0 * (1.0 - f64::EPSILON / 2.0),
+            least * 1.5,
+            least * 2.5,
+            f64::MIN_POSITIVE,
+            f64::from_bits(1),
+            f64::MAX,
+            f64::INFINITY,
+            f64::NAN,
+            2f64.powi(128),
+            2f64.powi(128) * (1.0 - f64::EPSILON / 2.0),
+            2f64.powi(-126) * (1.0 - f64::EPSILON / 2.0),
+        ];
+        for x in edges {
+            for y in [x, -x] {
+                check(y);
+                // Neighbours: ties, and one ulp either side.
+                for d in [1u64, 2, 1 << 28, (1 << 29) - 1, 1 << 29, (1 << 29) + 1] {
+                    check(f64::from_bits(y.to_bits().wrapping_add(d)));
+                    check(f64::from_bits(y.to_bits().wrapping_sub(d)));
+                }
+            }
+        }
+        // Every f32 exactly, and the midpoints between neighbours (ties).
+        let mut bits = 0u32;
+        while bits < 0x7f80_0000 {
+            let a = f64::from(f32::from_bits(bits));
+            let b = f64::from(f32::from_bits(bits + 1));
+            check(a);
+            check(-a);
+            check((a + b) / 2.0);
+            check(-(a + b) / 2.0);
+            bits += 4099;
+        }
+        // Random bit patterns, and random significands with an exponent
+        // in or near the f32 range (xorshift64*).
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..1_000_000 {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            let r = state.wrapping_mul(0x2545_f491_4f6c_dd1d);
+            check(f64::from_bits(r));
+            let exp = 1023 - 160 + (r >> 52) % 300;
+            check(f64::from_bits((r & 0x800f_ffff_ffff_ffff) | exp << 52));
+        }
     }
 
     #[test]

@@ -81,7 +81,9 @@ pub(super) fn finish<T: Real, S: Sample>(
     runs.visit(samples, |s, prev| {
         if let Some(y) = gate.pass(s, prev) {
             spanned += 1;
-            let within = limit.is_none_or(|l| (calibration.map(y).norm() - T::one()).abs() <= l);
+            let within = limit.is_none_or(|l| {
+                (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
+            });
             figures.beside += usize::from(within);
         }
     });
@@ -107,9 +109,9 @@ pub(super) fn finish<T: Real, S: Sample>(
     }
     figures.field_deviation = config
         .expected_field_strength
-        .map(|expected| calibration.field_strength() / T::lit(expected) - T::one());
+        .map(|expected| calibration.field_strength() / T::from_double(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
-    let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.sqrt());
+    let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
         quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
@@ -182,8 +184,10 @@ impl<T: Real> Figures<T> {
         let low_spread = config.noise_covariance.is_some_and(|c| {
             // In T: no f64 arithmetic (soft-float on a Cortex-M4F) in the
             // f32 path.
-            let var = (T::lit(c[0][0]) + T::lit(c[1][1]) + T::lit(c[2][2])) / T::lit(3.0);
-            scan.norm.scale < T::from_single(config.thresholds.warn_spread_over_noise) * var.sqrt()
+            let var = (T::from_double(c[0][0]) + T::from_double(c[1][1]) + T::from_double(c[2][2]))
+                / T::lit(3.0);
+            scan.norm.scale
+                < T::from_single(config.thresholds.warn_spread_over_noise) * var.square_root()
         });
         Self::before_fit(
             scan.used,

@@ -123,26 +123,31 @@ pub(crate) fn stride(rows: usize) -> usize {
 /// study's clean runs (1000 and 600 rows, 415 counts or 52 uT, 1 % noise):
 /// 3 rows sent 4 of 128 integer runs past the plain fit, 4 none of 256;
 /// every run with 2 % of the rows clipped at one level went to screening,
-/// about half of those with 1 %. Cost on a Cortex-M4F: about 39
-/// instructions a subsampled row (LS9 + ADC2 at n = 1000: +12 880).
+/// about half of those with 1 %. Cost on a Cortex-M4F: about 47
+/// instructions a subsampled row (LS9 + ADC2 at n = 1000: about +15 600).
 pub const CLIP_HINT_ROWS: u32 = 4;
 
 /// Whether an extreme of an axis over the subsample (every
 /// [`stride`]`(used)`-th row that `gate` passes) is shared by at least
 /// [`CLIP_HINT_ROWS`] of its rows and at most half of them: one pass over
-/// the subsample (about 39 instructions a subsampled row on a Cortex-M4F
+/// the subsample (about 47 instructions a subsampled row on a Cortex-M4F
 /// when no rule drops a row).
 #[inline(never)]
 pub(crate) fn clip_hint<T: Real, S: Sample>(samples: &[S], gate: &Gate<T>, used: usize) -> bool {
     let step = stride(used);
-    if gate.is_plain() {
-        // No rule to apply, no row before to look at: the conversion alone
-        // (for integer rows).
-        let plain = Rules::<T>::PLAIN;
-        shared_extreme(samples, step, |s, _| check::<T, S>(s, None, &plain).ok())
-    } else {
-        shared_extreme(samples, step, |s, prev| gate.pass(s, prev))
-    }
+    // One loop for both gates: the plain one (no rule to apply, no row
+    // before to look at) takes the conversion alone (for integer rows)
+    // inline. A copy of the loop for each took 392 bytes of flash more
+    // (LS9 + ADC2) for 2 760 instructions less (clean, n = 1000).
+    let plain = gate.is_plain();
+    let rules = Rules::<T>::PLAIN;
+    shared_extreme(samples, step, |s, prev| {
+        if plain {
+            check::<T, S>(s, None, &rules).ok()
+        } else {
+            gate.pass(s, prev)
+        }
+    })
 }
 
 /// [`clip_hint`] with the rows that `pass` keeps (given the row and the
@@ -265,7 +270,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     passes += 1;
     let m = dist
         .quantile(T::lit(0.5))
-        .map(|q| q.sqrt() * spread)
+        .map(|q| q.square_root() * spread)
         .unwrap_or(T::zero());
     // Rows within the re-centring radius (the histogram counts squared
     // distances over the spread's square).
@@ -424,7 +429,7 @@ fn recentre<T: Real, S: Sample>(
     }
     let r = dist
         .quantile(T::lit(0.5))
-        .map(|q| q.sqrt() * m)
+        .map(|q| q.square_root() * m)
         .unwrap_or(T::zero());
     let ok = r > T::zero() && r.is_finite() && centre.iter().all(|v| v.is_finite());
     (ok.then_some((centre, r)), 2)

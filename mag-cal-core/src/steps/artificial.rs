@@ -138,7 +138,7 @@ impl<T: Real> Stats<T> {
         let tails = if s2 > T::zero() {
             Tails {
                 kurtosis: n * s4 / (s2 * s2),
-                skewness: n.sqrt() * s3 / (s2 * s2.sqrt()),
+                skewness: n.square_root() * s3 / (s2 * s2.square_root()),
             }
         } else {
             Tails {
@@ -457,7 +457,9 @@ fn directions<T: Real, S: Sample>(
     let mut max = res.max;
     let hist = &mut res.hist;
     for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
-        let row = pass.gate.pass(sample, last);
+        // Inlined: under the robust path this loop runs at the deepest
+        // stack of the fit.
+        let row = pass.gate.pass_inlined(sample, last);
         last = Some(sample);
         *slot = [T::zero(); 4];
         let Some(y) = row else {

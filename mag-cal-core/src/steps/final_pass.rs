@@ -135,7 +135,7 @@ fn lack_of_fit<T: Real>(cells: &Cells<T>, sigma: T, centred: bool) -> (T, bool) 
     }
     let cells = T::from_count(used);
     let significant = chi / (noise * cells) > T::lit(LOF_SIGNIFICANCE);
-    (larger(misfit / cells, T::zero()).sqrt(), significant)
+    (larger(misfit / cells, T::zero()).square_root(), significant)
 }
 
 /// One pass with the final calibration (normalised coordinates) over the
@@ -256,12 +256,12 @@ impl<T: Real> FinalSums<T> {
         let (m1, m2, m3) = (sum / n, t[0] / n, acc.cubes / n);
         let var = m2 - m1 * m1;
         let skewness = if var > T::zero() {
-            (m3 - T::lit(3.0) * m1 * m2 + T::lit(2.0) * m1 * m1 * m1) / (var * var.sqrt())
+            (m3 - T::lit(3.0) * m1 * m2 + T::lit(2.0) * m1 * m1 * m1) / (var * var.square_root())
         } else {
             T::zero()
         };
         Ok(FinalPass {
-            radial_rms: (t[0] / T::from_count(acc.used)).sqrt(),
+            radial_rms: (t[0] / T::from_count(acc.used)).square_root(),
             coverage,
             gram_condition,
             passed: acc.passed,

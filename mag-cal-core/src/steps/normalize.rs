@@ -170,7 +170,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     {
         return Err(Error::OutOfRange);
     }
-    let scale = var.sqrt();
+    let scale = var.square_root();
     Ok(Scan {
         norm: Normalization {
             centre,

@@ -83,7 +83,7 @@ fn weight<T: Real>(
 ) -> Result<Matrix3<T>, Error> {
     let sigma = match config.noise_covariance {
         Some(c) => {
-            let m = Matrix3::from_fn(|i, j| T::lit(c[i][j]));
+            let m = Matrix3::from_fn(|i, j| T::from_double(c[i][j]));
             let finite = m.iter().all(|v| v.is_finite());
             if !finite || m != m.transpose() {
                 return Err(Error::InvalidNoiseCovariance);

@@ -121,7 +121,7 @@ pub(crate) fn step<T: Real, S: Sample>(
     let tol = match config.pass_tolerance {
         // A tolerance that can never be met (negative, zero, NaN) would only
         // run to the pass cap: it means the default.
-        Some(t) if t > 0.0 && t.is_finite() => T::lit(t),
+        Some(t) if t > 0.0 && t.is_finite() => T::from_double(t),
         _ if T::EPSILON > T::lit(1e-10) => T::lit(1e-5),
         _ => T::lit(1e-6),
     };
