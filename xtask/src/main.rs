@@ -3,7 +3,7 @@
 //!
 //! | command | what |
 //! |---|---|
-//! | `setup` | install what a fresh machine lacks: the thumb and wasm targets (rustup), `qemu-system-arm`, `gcc-arm-none-eabi`, `libnewlib-arm-none-eabi`, `chromium`, and `nodejs` with `npm` when npm is missing (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
+//! | `setup` | install what a fresh machine lacks: the thumb, RISC-V and wasm targets (rustup), `qemu-system-arm`, `gcc-arm-none-eabi`, `libnewlib-arm-none-eabi`, `chromium`, and `nodejs` with `npm` when npm is missing (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
 //! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run, the page's browser tests (`web-test`) and the no-panic link proof (`no-panic-check/check.sh`) |
@@ -112,8 +112,8 @@ fn is_root() -> bool {
 /// Installs what is missing; idempotent and quiet when nothing is.
 fn setup() -> Result<(), String> {
     let root = root();
-    // Reads rust-toolchain.toml: the pinned channel, the thumb target,
-    // clippy and rustfmt.
+    // Reads rust-toolchain.toml: the pinned channel, the thumb, RISC-V and
+    // wasm targets, clippy and rustfmt.
     run(&root, "rustup", &["toolchain", "install"])?;
     // A toolchain of that channel installed earlier without the target
     // (seen: `toolchain install` then leaves it out); a no-op when present.
@@ -124,6 +124,8 @@ fn setup() -> Result<(), String> {
             "target",
             "add",
             "thumbv7em-none-eabihf",
+            "thumbv6m-none-eabi",
+            "riscv32imc-unknown-none-elf",
             "wasm32-unknown-unknown",
         ],
     )?;
