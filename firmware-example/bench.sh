@@ -148,7 +148,9 @@ verify_bench() {
 }
 
 # attribute BASE ELF: code and read-only data of ELF that BASE lacks, by
-# component (symbol sizes from nm; `other` is mostly anonymous constants).
+# component: the core by folder (pipeline, steps, robust, judge, numerics,
+# the rest), the optional methods apart; symbol sizes from nm; `other` is
+# mostly anonymous constants.
 attribute() {
     LC_ALL=C awk '
         FNR == 1 { file++ }
@@ -162,8 +164,12 @@ attribute() {
             for (i = 1; i <= length(hex); i++) size = size * 16 + index("0123456789abcdef", substr(hex, i, 1)) - 1
             n = name
             sub(/^[<&]+/, "", n)
-            if (n ~ /^mag_cal_core::methods::(submle|iterated|adc1)/ || n ~ /^mag_cal_core::quasi_newton::Anderson/) c = "core-other-methods"
+            if (n ~ /^mag_cal_core::steps::methods::(submle|adc2_iter|adc1)/ || n ~ /^mag_cal_core::numerics::quasi_newton::Anderson/) c = "core-other-methods"
             else if (n ~ /^mag_cal_core::(calibrate|pipeline)/) c = "core-pipeline"
+            else if (n ~ /^mag_cal_core::steps/) c = "core-steps"
+            else if (n ~ /^mag_cal_core::robust/) c = "core-robust"
+            else if (n ~ /^mag_cal_core::judge/) c = "core-judge"
+            else if (n ~ /^mag_cal_core::numerics/) c = "core-numerics"
             else if (n ~ /^mag_cal_core/) c = "core-rest"
             else if (n ~ /^(nalgebra|simba)/) c = "nalgebra"
             else if (n ~ /^libm/) c = "libm"
@@ -174,8 +180,8 @@ attribute() {
         }
         END {
             line = "total=" total
-            split("core-pipeline core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
-            for (i = 1; i <= 8; i++) line = line " " order[i] "=" sum[order[i]] + 0
+            k = split("core-pipeline core-steps core-robust core-judge core-numerics core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
+            for (i = 1; i <= k; i++) line = line " " order[i] "=" sum[order[i]] + 0
             print line
         }' <(nm -S -C --defined-only "$1") <(nm -S -C --defined-only "$2")
 }
