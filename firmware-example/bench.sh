@@ -10,6 +10,9 @@
 #              and the flash of a method chosen at run time with the core's
 #              method features (none, or one optional method added):
 #                FOOTPRINT runtime-method features=<feature> flash=<bytes>
+#              and LS9 + ADC2 built for the Cortex-M0+ (thumbv6m-none-eabi,
+#              no FPU: f32 in software), the same program and profile:
+#                FOOTPRINT ls9+adc2-thumbv6m flash=<bytes> stack=<bytes> ram_per_sample=<bytes>
 #   all        both (the default)
 #   --verify   with `bench`/`all`: run the bench a second time single-stepped
 #              with QEMU's exec log, count every instruction between the
@@ -44,6 +47,11 @@ done
 
 out=target/thumbv7em-none-eabihf/release
 build() { cargo build --release --locked --no-default-features --features qemu --bin "$@" >&2; }
+# The Cortex-M0+ build (ARMv6-M, no FPU): f32 arithmetic is compiler-builtins'
+# software routines (`__aeabi_fadd`, ...), linked in and counted in the flash.
+v6m=thumbv6m-none-eabi
+out_v6m=target/$v6m/release
+build_v6m() { build "$@" --target "$v6m"; }
 qemu=(qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic -monitor none
       -serial none -semihosting-config enable=on,target=native)
 # run_qemu ELF [QEMU ARGS...]: the firmware's defmt log, one message a line;
@@ -140,7 +148,9 @@ verify_bench() {
 }
 
 # attribute BASE ELF: code and read-only data of ELF that BASE lacks, by
-# component (symbol sizes from nm; `other` is mostly anonymous constants).
+# component: the core by folder (pipeline, steps, robust, judge, numerics,
+# the rest), the optional methods apart; symbol sizes from nm; `other` is
+# mostly anonymous constants.
 attribute() {
     LC_ALL=C awk '
         FNR == 1 { file++ }
@@ -154,8 +164,12 @@ attribute() {
             for (i = 1; i <= length(hex); i++) size = size * 16 + index("0123456789abcdef", substr(hex, i, 1)) - 1
             n = name
             sub(/^[<&]+/, "", n)
-            if (n ~ /^mag_cal_core::methods::(submle|iterated|adc1)/ || n ~ /^mag_cal_core::quasi_newton::Anderson/) c = "core-other-methods"
+            if (n ~ /^mag_cal_core::steps::methods::(submle|adc2_iter|adc1)/ || n ~ /^mag_cal_core::numerics::quasi_newton::Anderson/) c = "core-other-methods"
             else if (n ~ /^mag_cal_core::(calibrate|pipeline)/) c = "core-pipeline"
+            else if (n ~ /^mag_cal_core::steps/) c = "core-steps"
+            else if (n ~ /^mag_cal_core::robust/) c = "core-robust"
+            else if (n ~ /^mag_cal_core::judge/) c = "core-judge"
+            else if (n ~ /^mag_cal_core::numerics/) c = "core-numerics"
             else if (n ~ /^mag_cal_core/) c = "core-rest"
             else if (n ~ /^(nalgebra|simba)/) c = "nalgebra"
             else if (n ~ /^libm/) c = "libm"
@@ -166,8 +180,8 @@ attribute() {
         }
         END {
             line = "total=" total
-            split("core-pipeline core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
-            for (i = 1; i <= 8; i++) line = line " " order[i] "=" sum[order[i]] + 0
+            k = split("core-pipeline core-steps core-robust core-judge core-numerics core-rest core-other-methods nalgebra libm compiler-builtins rust-core other", order, " ")
+            for (i = 1; i <= k; i++) line = line " " order[i] "=" sum[order[i]] + 0
             print line
         }' <(nm -S -C --defined-only "$1") <(nm -S -C --defined-only "$2")
 }
@@ -198,15 +212,17 @@ run_footprint() {
     log=$(mktemp)
     run_qemu "$out/footprint" >"$log"
     sed 's/^/# /' "$log"
+    # ram_of LOG: the bytes of one stored sample (the run's RAM line).
+    ram_of() { awk '/^RAM / { for (i = 2; i <= NF; i++) if ($i ~ /^sample_bytes=/) { sub(/.*=/, "", $i); print $i } }' "$1"; }
     local ram_per_sample
-    ram_per_sample=$(awk '/^RAM / { for (i = 2; i <= NF; i++) if ($i ~ /^sample_bytes=/) { sub(/.*=/, "", $i); print $i } }' "$log")
-    # A method's figure is the largest of its clean, contaminated and
-    # doubtful runs.
-    stack_of() { awk -v m="$1" '$1 == "STACK" && ($2 == m || $2 == m "-contaminated" || $2 == m "-doubtful") { sub(/.*=/, "", $4); if ($4 + 0 > s) s = $4 + 0 } END { print s + 0 }' "$log"; }
+    ram_per_sample=$(ram_of "$log")
+    # A method's figure (stack_of METHOD LOG) is the largest of its clean,
+    # contaminated and doubtful runs.
+    stack_of() { awk -v m="$1" '$1 == "STACK" && ($2 == m || $2 == m "-contaminated" || $2 == m "-doubtful") { sub(/.*=/, "", $4); if ($4 + 0 > s) s = $4 + 0 } END { print s + 0 }' "$2"; }
     local max_stack
     max_stack=$(awk '$1 == "STACK" { sub(/.*=/, "", $4); if ($4 + 0 > m) m = $4 + 0 } END { print m + 0 }' "$log")
-    echo "FOOTPRINT ls flash=$((flash[ls] - flash[baseline])) stack=$(stack_of ls) ram_per_sample=$ram_per_sample"
-    echo "FOOTPRINT ls9+adc2 flash=$((flash[ls9+adc2] - flash[baseline])) stack=$(stack_of adc2) ram_per_sample=$ram_per_sample"
+    echo "FOOTPRINT ls flash=$((flash[ls] - flash[baseline])) stack=$(stack_of ls "$log") ram_per_sample=$ram_per_sample"
+    echo "FOOTPRINT ls9+adc2 flash=$((flash[ls9+adc2] - flash[baseline])) stack=$(stack_of adc2 "$log") ram_per_sample=$ram_per_sample"
     echo "FOOTPRINT all-methods flash=$((flash[all] - flash[baseline])) stack=$max_stack ram_per_sample=$ram_per_sample"
     rm -f "$log"
     # The core's method features, with the method chosen at run time:
@@ -221,6 +237,25 @@ run_footprint() {
         f=$(flash_of "$out/footprint")
         echo "FOOTPRINT runtime-method features=$feature flash=$((f - flash[baseline]))"
     done
+    # LS9 + ADC2 on the Cortex-M0+: the same builds for thumbv6m-none-eabi
+    # (baseline and ls9+adc2 for the flash, over the baseline built for it
+    # too). The stack run's build executes on the same emulated Cortex-M4:
+    # ARMv6-M's Thumb instructions are a subset of ARMv7-M's, so QEMU runs
+    # the M0+ build's own instructions and the painted stack is the M0+
+    # build's.
+    for v in baseline ls9+adc2; do
+        MAG_CAL_FOOTPRINT=$v build_v6m footprint
+        cp "$out_v6m/footprint" "target/footprint/$v-$v6m.elf"
+        flash[$v-$v6m]=$(flash_of "target/footprint/$v-$v6m.elf")
+    done
+    echo "# flash $v6m (.text + .rodata, opt-level s, fat LTO): baseline=${flash[baseline-$v6m]} ls9+adc2=${flash[ls9+adc2-$v6m]} bytes"
+    echo "# flash ls9+adc2-$v6m over baseline, by symbol: $(attribute "target/footprint/baseline-$v6m.elf" "target/footprint/ls9+adc2-$v6m.elf")"
+    build_v6m footprint
+    log=$(mktemp)
+    run_qemu "$out_v6m/footprint" >"$log"
+    sed "s/^/# $v6m: /" "$log"
+    echo "FOOTPRINT ls9+adc2-thumbv6m flash=$((flash[ls9+adc2-$v6m] - flash[baseline-$v6m])) stack=$(stack_of adc2 "$log") ram_per_sample=$(ram_of "$log")"
+    rm -f "$log"
 }
 
 case $what in

@@ -3,7 +3,7 @@
 //!
 //! | command | what |
 //! |---|---|
-//! | `setup` | install what a fresh machine lacks: the thumb and wasm targets (rustup), `qemu-system-arm`, `gcc-arm-none-eabi`, `libnewlib-arm-none-eabi`, `chromium`, and `nodejs` with `npm` when npm is missing (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
+//! | `setup` | install what a fresh machine lacks: the thumb, RISC-V and wasm targets (rustup), `qemu-system-arm`, `gcc-arm-none-eabi`, `libnewlib-arm-none-eabi`, `chromium`, and `nodejs` with `npm` when npm is missing (apt), `defmt-print`, `flip-link` and `cbindgen` (cargo install) |
 //! | `qemu` | setup, then build and run the firmware on the emulated Cortex-M4F (the main job) |
 //! | `qemu-faults` | setup, then the same run with sensor faults injected (`--features qemu,faults`) |
 //! | `test` | setup, then every test: host tests, the core's examples, the packaged core's own tests (extracted from `cargo package`), the on-target tests under QEMU, the board build, the QEMU run, the fault run, the page's browser tests (`web-test`) and the no-panic link proof (`no-panic-check/check.sh`) |
@@ -11,7 +11,7 @@
 //! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU), the README's C example compiles as it stands and runs, and the README's C footprint figures hold (`c-footprint`) |
 //! | `c-footprint` | setup, then flash and stack of one `magcal_calibrate_i16` call on the Cortex-M4F, with the library the README's target command builds (`FOOTPRINT-C` lines), checked against the README's figures (within 5 %) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
-//! | `bench` | setup, then the Cortex-M4F benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts and `FOOTPRINT` lines; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
+//! | `bench` | setup, then the benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts on the Cortex-M4F and `FOOTPRINT` lines (Cortex-M4F, and LS9 + ADC2 on the Cortex-M0+), then `c-footprint`; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //! | `web` | setup, then build the calibration page (`mag-cal-web`: the wasm, `npm ci`, the page assembled in `target/web`) and serve it on `http://127.0.0.1:8080/` (or the port given) |
 //! | `web-test` | setup, then build the page and run its browser tests (`mag-cal-web/tests`, Playwright driving Debian's `chromium`) |
 //!
@@ -112,8 +112,8 @@ fn is_root() -> bool {
 /// Installs what is missing; idempotent and quiet when nothing is.
 fn setup() -> Result<(), String> {
     let root = root();
-    // Reads rust-toolchain.toml: the pinned channel, the thumb target,
-    // clippy and rustfmt.
+    // Reads rust-toolchain.toml: the pinned channel, the thumb, RISC-V and
+    // wasm targets, clippy and rustfmt.
     run(&root, "rustup", &["toolchain", "install"])?;
     // A toolchain of that channel installed earlier without the target
     // (seen: `toolchain install` then leaves it out); a no-op when present.
@@ -124,6 +124,8 @@ fn setup() -> Result<(), String> {
             "target",
             "add",
             "thumbv7em-none-eabihf",
+            "thumbv6m-none-eabi",
+            "riscv32imc-unknown-none-elf",
             "wasm32-unknown-unknown",
         ],
     )?;

@@ -40,6 +40,15 @@
 //! a debug build uses far more). QEMU executes the same instructions as the
 //! chip, so the stack use is the chip's.
 //!
+//! # The Cortex-M0+ build
+//!
+//! `bench.sh footprint` also builds `baseline`, `ls9+adc2` and the stack run
+//! for `thumbv6m-none-eabi` (ARMv6-M, no FPU: `f32` arithmetic in software,
+//! compiler-builtins' routines counted in the flash). The stack run of that
+//! build executes on the same QEMU machine: ARMv6-M's Thumb instructions are
+//! a subset of ARMv7-M's, so the Cortex-M4 executes the M0+ build's own
+//! instructions and the painted stack is that build's.
+//!
 //! Run: `./bench.sh footprint` in `firmware-example/`.
 
 #![no_std]
