@@ -304,8 +304,15 @@ pub fn ablation(args: &[String]) -> Result<(), String> {
     let together = if pruned.is_empty() {
         None
     } else {
+        // A set of one was measured alone already.
         let v = Variant::without(&pruned);
-        Some((v.label.clone(), measure(&base, &v, &o)?))
+        let reuse = Options {
+            reuse: o.reuse || pruned.len() == 1 && o.names.contains(&pruned[0]),
+            names: vec![],
+            set: None,
+            ..o
+        };
+        Some((v.label.clone(), measure(&base, &v, &reuse)?))
     };
     let report = render(&o, &full, &alone, &pruned, together.as_ref());
     print!("{report}");
