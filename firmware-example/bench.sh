@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Benchmarks of the calibration on the emulated Cortex-M4F (QEMU mps2-an386).
 #
-# usage: bench.sh [bench|footprint|all] [--verify]
+# usage: bench.sh [bench|footprint|flash|all] [--verify]
 #
 #   bench      instruction counts (src/bin/bench.rs), f32, [i16; 3] samples:
 #                BENCH <name> n=<n> instructions=<count>
@@ -13,7 +13,10 @@
 #              and LS9 + ADC2 built for the Cortex-M0+ (thumbv6m-none-eabi,
 #              no FPU: f32 in software), the same program and profile:
 #                FOOTPRINT ls9+adc2-thumbv6m flash=<bytes> stack=<bytes> ram_per_sample=<bytes>
-#   all        both (the default)
+#   flash      the flash of LS9 + ADC2 alone (two of the footprint's builds,
+#              no QEMU run): FOOTPRINT ls9+adc2 flash=<bytes>, as `footprint`
+#              gives it (`cargo xtask ablation` reads it)
+#   all        bench and footprint (the default)
 #   --verify   with `bench`/`all`: run the bench a second time single-stepped
 #              with QEMU's exec log, count every instruction between the
 #              markers around each timed region, and compare with the
@@ -36,10 +39,10 @@ what=all
 verify=0
 for arg in "$@"; do
     case $arg in
-        bench | footprint | all) what=$arg ;;
+        bench | footprint | flash | all) what=$arg ;;
         --verify) verify=1 ;;
         *)
-            echo "usage: $0 [bench|footprint|all] [--verify]" >&2
+            echo "usage: $0 [bench|footprint|flash|all] [--verify]" >&2
             exit 2
             ;;
     esac
@@ -258,9 +261,30 @@ run_footprint() {
     rm -f "$log"
 }
 
+# The FOOTPRINT ls9+adc2 flash figure of run_footprint alone.
+run_flash() {
+    if [ -z "$sizer" ]; then
+        echo "bench.sh: need size (binutils) or llvm-size for the flash figures" >&2
+        return 1
+    fi
+    local v
+    declare -A flash
+    for v in baseline ls9+adc2; do
+        MAG_CAL_FOOTPRINT=$v build footprint
+        flash[$v]=$(flash_of "$out/footprint")
+    done
+    if ! [ "${flash[ls9+adc2]}" -gt "${flash[baseline]}" ]; then
+        echo "bench.sh: the footprint builds did not differ (MAG_CAL_FOOTPRINT not applied?)" >&2
+        return 1
+    fi
+    echo "# flash (.text + .rodata, opt-level s, fat LTO): baseline=${flash[baseline]} ls9+adc2=${flash[ls9+adc2]} bytes"
+    echo "FOOTPRINT ls9+adc2 flash=$((flash[ls9+adc2] - flash[baseline]))"
+}
+
 case $what in
     bench) run_bench ;;
     footprint) run_footprint ;;
+    flash) run_flash ;;
     all)
         run_bench
         run_footprint

@@ -11,6 +11,7 @@
 //! | `c` | setup, then the C API's tests: the header is current, the C program agrees with `magcal fit` on the host (gcc) and on the emulated Cortex-M4F (arm-none-eabi-gcc, QEMU), the README's C example compiles as it stands and runs, and the README's C footprint figures hold (`c-footprint`) |
 //! | `c-footprint` | setup, then flash and stack of one `magcal_calibrate_i16` call on the Cortex-M4F, with the library the README's target command builds (`FOOTPRINT-C` lines), checked against the README's figures (within 5 %) |
 //! | `package` | `cargo package -p mag-cal-core`, then the packaged crate's own tests in an extracted copy |
+//! | `ablation` | the robust path's mechanisms left out one at a time, then the set the rule prunes: the contamination study's robust ADC2 f32 cells, the flash of LS9 + ADC2 and the bench's instructions for each (needs what `bench` needs: run `setup` once); see `docs/robustness.md`, "Ablation" |
 //! | `bench` | setup, then the benchmarks under QEMU (`firmware-example/bench.sh`): `BENCH` instruction counts on the Cortex-M4F and `FOOTPRINT` lines (Cortex-M4F, and LS9 + ADC2 on the Cortex-M0+), then `c-footprint`; `--verify` also checks the counts against QEMU's exec log, `--host` also runs the criterion benchmarks (`cargo bench -p benches`); see `docs/benchmarks.md` |
 //! | `web` | setup, then build the calibration page (`mag-cal-web`: the wasm, `npm ci`, the page assembled in `target/web`) and serve it on `http://127.0.0.1:8080/` (or the port given) |
 //! | `web-test` | setup, then build the page and run its browser tests (`mag-cal-web/tests`, Playwright driving Debian's `chromium`) |
@@ -20,6 +21,8 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{exit, Command};
+
+mod ablation;
 
 /// `defmt-print` version installed when missing (matches the `defmt` 1.0
 /// wire format the firmware emits).
@@ -46,10 +49,11 @@ fn main() {
         Some("c") => setup().and_then(|()| c_checks()),
         Some("c-footprint") => setup().and_then(|()| c_footprint_checked()),
         Some("bench") => setup().and_then(|()| bench(&args[1..])),
+        Some("ablation") => ablation::ablation(&args[1..]),
         Some("web") => setup().and_then(|()| web(&args[1..])),
         Some("web-test") => setup().and_then(|()| web_tests()),
         _ => {
-            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|c-footprint|bench [--verify] [--host]|web [PORT]|web-test>");
+            eprintln!("usage: cargo xtask <setup|qemu|qemu-faults|test|package|header|c|c-footprint|bench [--verify] [--host]|ablation [--runs N] [--set A,B] [--no-firmware] [--reuse] [NAMES]|web [PORT]|web-test>");
             exit(2);
         }
     };

@@ -354,7 +354,11 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
         });
     }
     if f.robust {
-        if below(Some(f.skewness), th.refuse_skewness) && above(f.fit_error, th.warn_fit_error) {
+        // (Ablation, docs/robustness.md: `filled-cloud` refuses no skewness.)
+        if !cfg!(mag_cal_ablate = "filled-cloud")
+            && below(Some(f.skewness), th.refuse_skewness)
+            && above(f.fit_error, th.warn_fit_error)
+        {
             return Err(Error::FilledCloud {
                 skewness: beyond(f.skewness, th.refuse_skewness, false),
                 limit: Figure::new(th.refuse_skewness),

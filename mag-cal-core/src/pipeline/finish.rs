@@ -166,10 +166,13 @@ pub(super) fn finish<T: Real, S: Sample>(
             report,
         },
         final_max: last.max_residual,
-        misfit: figures.misfit(&config.thresholds),
+        // (Ablation, docs/robustness.md: `misfit-gate` and `heavy-tails`
+        // leave these out of the plain fit's cleanness.)
+        misfit: !cfg!(mag_cal_ablate = "misfit-gate") && figures.misfit(&config.thresholds),
         misshapen: config.method == Method::Ls
             && last.lack_of_shape > last.fit_error * T::lit(CLEAN_SHAPE),
-        heavy_tails: last.radial_rms > last.fit_error * T::lit(CLEAN_TAIL)
+        heavy_tails: !cfg!(mag_cal_ablate = "heavy-tails")
+            && last.radial_rms > last.fit_error * T::lit(CLEAN_TAIL)
             && last.radial_rms * last.radial_rms > T::EPSILON,
     })
 }

@@ -123,7 +123,11 @@ pub(super) fn plain_start<T: Real, S: Sample>(
         screen: None,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
-    if config.robust && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS) {
+    // (Ablation, docs/robustness.md: `gross-kurtosis` always tries it.)
+    if config.robust
+        && !cfg!(mag_cal_ablate = "gross-kurtosis")
+        && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS)
+    {
         // Gross outliers: not worth a plain fit (the robust path screens;
         // the route is left to it).
         return Err(NOT_TAKEN);

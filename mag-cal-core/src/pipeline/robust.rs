@@ -57,7 +57,8 @@ pub(super) fn robust_path<T: Real, S: Sample>(
 ) -> Result<Fit<T>, Error> {
     let mut first = Attempt::default();
     let mut fit = robust_attempt(samples, config, scan, ls_solve, step, 0, 0, &mut first);
-    if !first.doubt {
+    // (Ablation, docs/robustness.md: `windows` lets the first run stand.)
+    if cfg!(mag_cal_ablate = "windows") || !first.doubt {
         return fit;
     }
     let Some(k) = best_start(samples, config, scan, ls_solve, &mut first.passes) else {
@@ -184,7 +185,9 @@ pub(super) fn robust_score<T: Real, S: Sample>(
     let gate = &start.weights.gate;
     let share = T::from_single(config.thresholds.refuse_outlier_share);
     let score = refit::score(samples, &start.norm, gate, &start.ls, every).map(|s| {
-        if s.beyond > share {
+        // (Ablation, docs/robustness.md: `ambiguous-score` scores every
+        // start by its median alone.)
+        if !cfg!(mag_cal_ablate = "ambiguous-score") && s.beyond > share {
             s.median / T::lit(AMBIGUOUS_SCORE)
         } else {
             s.median

@@ -336,7 +336,10 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             // `passes` counts the crude start's pass: the refits after the
             // first (which has no quantile yet) are trimmed, up to
             // `TRIM_REFITS` of them.
-            let trimmed = trim.filter(|_| rows > 1 && passes <= TRIM_REFITS + 1);
+            // (Ablation, docs/robustness.md: `trim` trims no refit.)
+            let trimmed = trim.filter(|_| {
+                !cfg!(mag_cal_ablate = "trim") && rows > 1 && passes <= TRIM_REFITS + 1
+            });
             let limit = trimmed.map_or(sigma * T::lit(OUTLIER_CUT), |t| {
                 smaller(sigma * T::lit(OUTLIER_CUT), t)
             });
@@ -347,11 +350,14 @@ pub(crate) fn robust_ls<T: Real, S: Sample>(
             // nothing without a window (a limit of zero keeps no row, and
             // its moments cost nothing) and refits from a window start,
             // whose subsample left out half the rows.
-            let find = if rows > 1 {
-                sub_finds && trimmed.is_none()
-            } else {
-                passes >= 3 && !found
-            };
+            // (Ablation, docs/robustness.md: `runs` finds none, and every
+            // pass refits.)
+            let find = !cfg!(mag_cal_ablate = "runs")
+                && if rows > 1 {
+                    sub_finds && trimmed.is_none()
+                } else {
+                    passes >= 3 && !found
+                };
             let only_find = find && rows == 1 && window.is_empty();
             let (skip, out) = if find && rows == 1 {
                 (&Runs::NONE, Some(&mut *runs))

@@ -134,6 +134,10 @@ pub const CLIP_HINT_ROWS: u32 = 4;
 /// when no rule drops a row).
 #[inline(never)]
 pub(crate) fn clip_hint<T: Real, S: Sample>(samples: &[S], gate: &Gate<T>, used: usize) -> bool {
+    if cfg!(mag_cal_ablate = "clip-hint") {
+        // Ablation (docs/robustness.md): the plain path is always tried.
+        return false;
+    }
     let step = stride(used);
     // One loop for both gates: the plain one (no rule to apply, no row
     // before to look at) takes the conversion alone (for integer rows)
@@ -292,7 +296,8 @@ pub(crate) fn screen<T: Real, S: Sample>(
     };
     // Only when the median centre's ball leaves out so many rows that
     // another ball could hold the required share more.
-    let (kasa, kasa_passes) = if enough_more(rows_near) {
+    // (Ablation, docs/robustness.md: `recentre` keeps the median centre.)
+    let (kasa, kasa_passes) = if !cfg!(mag_cal_ablate = "recentre") && enough_more(rows_near) {
         recentre(samples, &gate, centre, m, every)
     } else {
         (None, 0)
@@ -633,6 +638,10 @@ fn clip_levels<T: Real>(
         }
     };
     let mut out = [[T::MAX; 2]; 3];
+    if cfg!(mag_cal_ablate = "clip-extremes") {
+        // Ablation (docs/robustness.md): no extreme is a clip level.
+        return out;
+    }
     for (o, ((&lo, &hi), &[nl, nh])) in out.iter_mut().zip(lo.iter().zip(hi).zip(at)) {
         if lo < hi {
             *o = [level(lo, nl), level(hi, nh)];
@@ -664,6 +673,10 @@ fn interior_levels<T: Real, S: Sample>(
     counted: usize,
     levels: &mut [[T; 2]; 3],
 ) -> u32 {
+    if cfg!(mag_cal_ablate = "clip-inside") {
+        // Ablation (docs/robustness.md): no level inside the range.
+        return 0;
+    }
     // The subsample's bins hold a few rows each, and one of them stands out
     // of its neighbours by chance unless it holds twice a clip level's
     // share.

@@ -212,8 +212,12 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
 ) -> Result<Option<PassStats<T>>, Error> {
     if weights.gate.is_plain() && weights.sigma.is_none() {
         let (stats, tails) = Stats::accumulate_plain(samples, norm, centre, w)?;
-        let outside =
-            |(kurtosis, skewness): (T, T)| tails.kurtosis > kurtosis || tails.skewness < -skewness;
+        // (Ablation, docs/robustness.md: `kurtosis-gate` and
+        // `skewness-gate` take either figure out.)
+        let outside = |(kurtosis, skewness): (T, T)| {
+            (!cfg!(mag_cal_ablate = "kurtosis-gate") && tails.kurtosis > kurtosis)
+                || (!cfg!(mag_cal_ablate = "skewness-gate") && tails.skewness < -skewness)
+        };
         if weights.tails_limit.is_some_and(outside) {
             // Heavy tails, or rows pulled inwards: this plain fit will not be
             // taken.
