@@ -751,7 +751,7 @@ fn render(
             let why = if set.as_slice() == pruned {
                 "the rule's pruned set"
             } else {
-                "asked for (`--set`)"
+                "asked for with `--set`"
             };
             let _ = writeln!(s, "- {}: {} ({why})", label(k), quoted(set));
         }
