@@ -177,7 +177,7 @@
 //! the fit, one for the scan and one for the figures); 0.7-1.6 M on samples
 //! with 10 % of the rows contaminated, and about 8.3 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
-//! 46 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
+//! 41 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
 //! variant.
 //!
 //! # Features
