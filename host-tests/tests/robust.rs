@@ -268,15 +268,16 @@ fn the_rows_beside_a_run_are_counted_and_classified_as_rejected() {
 
 /// One axis clipped on some reads (a lower clip level with rows left
 /// beyond it, so the level is no extreme of the axis) in 20 and 30 % of
-/// the rows: at most 2 % of the runs silently wrong (the issue's target
-/// at 20-30 %), and the clipped rows dropped by the clip rule. The plain
-/// fit bends to the rows pulled inwards, and its residuals stay within the
-/// clean limits; their skewness (`CLEAN_SKEWNESS`) sends the fit to the
-/// robust path, whose screening finds the levels inside the range. Before
-/// both, 57 % of the 30 % runs were silently wrong; with the levels found
-/// only on the robust path, 54 %; with the skewness only, 9 %.
+/// the rows: at least 97 % of the runs accepted and at most 2 % silently
+/// wrong (the issue's target at 20-30 %). The plain fit bends to the rows
+/// pulled inwards; the skewness of its residuals (`CLEAN_SKEWNESS`) sends
+/// it to the robust path. The accuracy is not held: the screening no
+/// longer searches for a clip level inside an axis's range (issue 35's
+/// ablation, `docs/robustness.md` section 5, pruned it: 1 148 B), and the
+/// median `e_M` ratio is 1.64 at 20 % and 3.25 at 30 % (1.41 at 30 % with
+/// the search); 1.17 % of the 30 % runs are silently wrong.
 #[test]
-fn an_axis_clipped_on_some_reads_is_found() {
+fn an_axis_clipped_on_some_reads_is_not_silently_wrong() {
     let grid = Grid {
         kinds: vec![Kind::ClipSaturation],
         fractions: vec![0.2, 0.3],
@@ -288,7 +289,8 @@ fn an_axis_clipped_on_some_reads_is_found() {
         for &f in &grid.fractions {
             let cell = study.pooled(&Case::Contaminated(Kind::ClipSaturation, f));
             let what = format!("{} clip {f}", precision.name());
-            assert_cell(&what, &cell, 0.97, 0.02, (1.5, 1.6));
+            // No accuracy target at 20-30 %.
+            assert_cell(&what, &cell, 0.97, 0.02, (f64::INFINITY, f64::INFINITY));
         }
     }
 }

@@ -46,7 +46,7 @@ use crate::{firmware_dir, root};
 
 /// The mechanisms, by the name of their gate, with what each does and the
 /// constants it uses (the order of the tables).
-pub const MECHANISMS: [(&str, &str); 14] = [
+pub const MECHANISMS: [(&str, &str); 12] = [
     (
         "clip-hint",
         "skip the plain fit when an axis's extreme is shared by many rows of the subsample (`screen::CLIP_HINT_ROWS` = 4)",
@@ -54,10 +54,6 @@ pub const MECHANISMS: [(&str, &str); 14] = [
     (
         "clip-extremes",
         "drop the rows at an axis's extreme that at least 1/64 of the rows (and 5) share (`rules::CLIP_SHARE`, `CLIP_MIN_ROWS`)",
-    ),
-    (
-        "clip-inside",
-        "clip levels inside an axis's range: a histogram spike, a majority vote, a count on every row (`screen::CLIP_SPIKE` = 3, twice the clip share)",
     ),
     (
         "recentre",
@@ -78,10 +74,6 @@ pub const MECHANISMS: [(&str, &str); 14] = [
     (
         "ambiguous-score",
         "a window start that leaves out more than the outlier share wins within a factor of the best score (`AMBIGUOUS_SCORE` = 1.25)",
-    ),
-    (
-        "gross-kurtosis",
-        "skip the plain fit when the kurtosis of the normalised rows shows gross outliers (`normalize::GROSS_KURTOSIS` = 3)",
     ),
     (
         "kurtosis-gate",

@@ -97,8 +97,7 @@ pub(super) enum Route {
     /// handling; with it ([`Config::robust`]), when the plain fit is clean.
     Plain,
     /// The robust path's: outlier handling is on, and the plain path
-    /// refused, failed, or its fit is not clean: gross outliers in the
-    /// moments ([`normalize::GROSS_KURTOSIS`]), residuals with heavy tails
+    /// refused, failed, or its fit is not clean: residuals with heavy tails
     /// or pulled inwards in the method's first pass ([`CLEAN_KURTOSIS`],
     /// [`CLEAN_SKEWNESS`]), a residual beyond [`CLEAN_LIMIT`] robust
     /// sigmas, an RMS beyond [`CLEAN_TAIL`] of them, a lack of fit beyond

@@ -123,15 +123,6 @@ pub(super) fn plain_start<T: Real, S: Sample>(
         screen: None,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
-    // (Ablation, docs/robustness.md: `gross-kurtosis` always tries it.)
-    if config.robust
-        && !cfg!(mag_cal_ablate = "gross-kurtosis")
-        && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS)
-    {
-        // Gross outliers: not worth a plain fit (the robust path screens;
-        // the route is left to it).
-        return Err(NOT_TAKEN);
-    }
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {
         (Ok(ls), gap) => (ls, gap),

@@ -9,10 +9,11 @@
 //!    half, until that half spans at least [`RESOLVED_BINS`] bins (1-2
 //!    passes on data without wild values, 3-4 with values 100 times the
 //!    field away). The first of these passes also finds the clip levels:
-//!    an axis's extreme value that many rows share, or a value inside its
-//!    range that many rows share exactly (an axis clipped on some reads
-//!    only), whose bin stands out of its neighbours ([`CLIP_SPIKE`]; two
-//!    more passes, only when one does);
+//!    an axis's extreme value that many rows share (one more pass over
+//!    every row confirms it, only when there is one). A level inside the
+//!    range (an axis clipped on some reads only) is not searched for: it
+//!    changed no target of the contamination table (`docs/robustness.md`,
+//!    section 5);
 //! 2. the median distance `m = median |y - c|` (one pass, a logarithmic histogram);
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
@@ -62,12 +63,6 @@ pub const CRUDE_SHARE: f64 = 0.7;
 pub const RESOLVED_BINS: usize = 16;
 /// Cap on the nested histogram passes.
 pub const MAX_LEVELS: u32 = 12;
-/// A bin of the first screening pass's per-axis histogram that holds at
-/// least this many times the rows of each neighbour (and a clip level's
-/// share of all rows) is searched for a value that many rows share
-/// exactly: a clip level inside the range. On a sphere an axis's values
-/// are spread evenly (neighbouring bins hold about as many rows).
-pub const CLIP_SPIKE: u32 = 3;
 /// The algebraic sphere fit that may replace the median centre sees the
 /// rows within this many median distances of it: the far side of a sphere
 /// whose samples crowd on one side (median distance down to a third of the
@@ -518,8 +513,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
                 );
             }
             let mut levels = clip_levels(sub_rows, (&box_lo, &box_hi), &at);
-            level_passes = interior_levels(samples, &gate, &h, every, sub_rows, &mut levels);
-            level_passes += confirm_levels(samples, &gate, scan.used, &mut levels);
+            level_passes = confirm_levels(samples, &gate, scan.used, &mut levels);
             rules = Rules {
                 glitches: scan.rules.glitches,
                 ..Rules::with_clip(levels)
@@ -650,94 +644,6 @@ fn clip_levels<T: Real>(
     out
 }
 
-/// Candidate clip levels inside an axis's range: a value that many rows
-/// share exactly, on a side of an axis whose extreme is no clip level. A clip
-/// that left some rows beyond it (an axis clipped on some reads only) puts
-/// such a value inside the range, where the extremes' count does not see
-/// it; its bin of the first pass's histogram `h`
-/// (of the `counted` rows of the subsample, every `stride`-th) stands
-/// out of its neighbours ([`CLIP_SPIKE`]), where that histogram
-/// resolves the axis, and holds at least twice a clip level's share (with
-/// once the share, a bin of a few rows stood out by chance on the
-/// benchmark's sphere with a tenth of its rows displaced, and the search
-/// ran for nothing). Only when one does, one pass over the subsample: a
-/// majority vote among the rows in that bin gives a candidate value,
-/// which [`confirm_levels`] counts on every row. Returns the passes
-/// taken.
-#[inline(never)]
-fn interior_levels<T: Real, S: Sample>(
-    samples: &[S],
-    gate: &Gate<T>,
-    h: &AxisHistograms<T>,
-    stride: usize,
-    counted: usize,
-    levels: &mut [[T; 2]; 3],
-) -> u32 {
-    if cfg!(mag_cal_ablate = "clip-inside") {
-        // Ablation (docs/robustness.md): no level inside the range.
-        return 0;
-    }
-    // The subsample's bins hold a few rows each, and one of them stands out
-    // of its neighbours by chance unless it holds twice a clip level's
-    // share.
-    let least = u32::try_from(2 * clip_rows(counted)).unwrap_or(u32::MAX);
-    // Per axis and side the bin to look in (0: none; the counter index
-    // otherwise, never 0, the counter below the window).
-    let mut bins = [[0usize; 2]; 3];
-    for (a, (b, l)) in bins.iter_mut().zip(levels.iter()).enumerate() {
-        // Only where the window resolves the axis (its middle half spans
-        // RESOLVED_BINS bins): with wild values in the window, the whole
-        // cloud sits in a few bins, which stand out of their empty
-        // neighbours.
-        let resolved = match (h.quantile(a, T::lit(0.25)), h.quantile(a, T::lit(0.75))) {
-            (Place::In(k1, _), Place::In(k3, _)) => k3 + 1 >= k1 + RESOLVED_BINS,
-            _ => false,
-        };
-        for (side, (bin, level)) in b.iter_mut().zip(l).enumerate() {
-            if resolved && !(level.abs() < T::MAX) {
-                *bin = h.spike(a, side == 1, least, CLIP_SPIKE).unwrap_or(0);
-            }
-        }
-    }
-    if bins.iter().flatten().all(|&k| k == 0) {
-        return 0;
-    }
-    // Boyer-Moore majority vote per bin: the value a majority of the bin's
-    // rows share, if any (`confirm_levels` counts it).
-    let mut votes = [[(T::zero(), 0u32); 2]; 3];
-    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
-        for (_, s, last) in every(block, prev, stride) {
-            let Some(y) = gate.pass(s, last) else {
-                continue;
-            };
-            for (a, (b, v)) in bins.iter().zip(votes.iter_mut()).enumerate() {
-                let k = h.counter_of(a, y[a]);
-                for (&bin, (value, count)) in b.iter().zip(v.iter_mut()) {
-                    if bin == 0 || k != bin {
-                        continue;
-                    }
-                    if *count == 0 {
-                        (*value, *count) = (y[a], 1);
-                    } else if *value == y[a] {
-                        *count += 1;
-                    } else {
-                        *count -= 1;
-                    }
-                }
-            }
-        }
-    }
-    // The candidates; `confirm_levels` counts them on every row.
-    for ((b, v), l) in bins.iter().zip(&votes).zip(levels.iter_mut()) {
-        for ((&bin, &(value, count)), level) in b.iter().zip(v).zip(l.iter_mut()) {
-            if bin != 0 && count > 0 {
-                *level = value;
-            }
-        }
-    }
-    1
-}
-
 /// Keeps the candidate clip levels (`levels`, `T::MAX` for none) that
 /// at least [`crate::steps::rules::CLIP_SHARE`] of the `used` rows `gate`
 /// passes (and [`crate::steps::rules::CLIP_MIN_ROWS`]) share exactly, but not
@@ -866,40 +772,6 @@ fn shell_residuals<T: Real, S: Sample>(
 mod tests {
     use super::*;
     use crate::steps::normalize::scan;
-
-    /// A sphere of 1000 integer rows, and every other row beyond `x = 470`
-    /// (320 counts from the centre; a tenth of the rows lie beyond) clipped
-    /// to it: a level inside the axis's range, found by the screening's
-    /// interior search and dropped; the rows left beyond it are kept.
-    #[test]
-    fn a_clip_level_inside_the_range_is_found() {
-        let mut rows: [[i16; 3]; 1000] = core::array::from_fn(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / 1000.0;
-            let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963);
-            let v = [r * phi.cos(), r * phi.sin(), z].map(|c| (400.0 * c).round() as i16);
-            [v[0] + 150, v[1] - 80, v[2] + 20]
-        });
-        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let clean = screen(&rows, &s).unwrap();
-        assert_eq!(clean.drops.clipped, 0);
-        let mut clipped = 0;
-        let mut beyond = 0;
-        for row in rows.iter_mut().filter(|r| r[0] > 470) {
-            beyond += 1;
-            if beyond % 2 == 0 {
-                row[0] = 470;
-                clipped += 1;
-            }
-        }
-        assert!(clipped > 40, "{clipped}");
-        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let dirty = screen(&rows, &s).unwrap();
-        assert_eq!(dirty.rules.clip[0][1], 470.0);
-        // The clipped rows, and the clean rows that were at 470 already.
-        let at = rows.iter().filter(|r| r[0] == 470).count();
-        assert_eq!(dirty.drops.clipped, at);
-        assert!(at >= clipped && at < clipped + 5, "{at} {clipped}");
-    }
 
     /// The plain path is skipped when an axis's extreme may be a clip
     /// level: 2 % of the rows of a sphere of 1000 clipped to the level that
