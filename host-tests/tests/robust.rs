@@ -127,7 +127,7 @@ fn contamination_up_to_ten_percent() {
                     // Every kind to the ratio of the target, a clipped
                     // range too: its rows share the axis's extreme, which
                     // sends the data past the plain fit to the screening's
-                    // clip rule (`screen::CLIP_HINT_ROWS`; at 2 % the
+                    // clip rule (`tuning::CLIP_HINT_ROWS`; at 2 % the
                     // plain fit passed as clean, with ratios 1.35 / 1.52).
                     let (needed, ratio) = match kind {
                         // 64 runs a cell here, where one run is 1.6 %: the
@@ -184,7 +184,7 @@ fn assert_cell(what: &str, cell: &CellStats, accepted: f64, wrong: f64, ratio: (
 /// distorted ellipsoid) and settle on the ellipsoid it bulged: 89.5 % of
 /// the one-step runs were accepted, the rest refused as a systematic
 /// misfit with `M` off by 0.07-0.28. The trimmed refits on the subsample
-/// (`robust::TRIM_SHARE`) escape it.
+/// (`tuning::TRIM_SHARE`) escape it.
 #[test]
 fn a_displaced_patch_of_the_trajectory_is_left_out() {
     meets_the_targets_up_to_ten_percent(Kind::Patch);
@@ -524,7 +524,7 @@ fn the_report_names_the_window_the_fit_started_without() {
 /// ball never accepted: in 4 of 256 runs the LS fit of its outer rows kept
 /// the fit error just under its limit (0.19-0.20), and those are refused
 /// as a filled cloud, their residuals skewed inwards
-/// (`quality::REFUSE_SKEWNESS`).
+/// (`tuning::REFUSE_SKEWNESS`).
 #[test]
 fn the_ls_fit_alone_is_judged_by_its_shape() {
     let grid = Grid {

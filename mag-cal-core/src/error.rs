@@ -506,7 +506,7 @@ mod tests {
 
     use super::*;
     use crate::device::planar;
-    use crate::judge::quality::{self, Thresholds};
+    use crate::judge::quality::Thresholds;
 
     /// The figure and the limit an error was decided by, when it has them;
     /// an exhaustive match, so that a new variant does not compile here
@@ -881,7 +881,7 @@ mod tests {
         let misfit = |x: f32| {
             Error::SystematicMisfit {
                 lack_of_fit: Figure::new(x),
-                limit: Figure::new(quality::REFUSE_LACK_OF_FIT as f32),
+                limit: Figure::new(crate::tuning::REFUSE_LACK_OF_FIT as f32),
             }
             .to_string()
         };

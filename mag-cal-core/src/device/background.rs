@@ -53,6 +53,7 @@
 //! assert!(!bg.is_stale());
 //! ```
 
+use crate::tuning::OUTLIER_CUT;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::device::collector;
@@ -65,7 +66,7 @@ use crate::sample::Sample;
 use crate::steps::artificial::{Pass, PassSums, Residuals};
 use crate::steps::ellipsoid::{self, Ellipsoid};
 use crate::steps::final_pass::{DirectionSums, FinalPass, FinalSums};
-use crate::steps::methods::{adc2, robust_sigma, OUTLIER_CUT};
+use crate::steps::methods::{adc2, robust_sigma};
 use crate::steps::moments::{Cut, Moments};
 use crate::steps::normalize::{Normalization, Projector, MIN_SAMPLES};
 use crate::steps::rules::{check, Drops, Gate, Rules};

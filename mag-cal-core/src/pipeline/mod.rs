@@ -13,9 +13,7 @@ use crate::{Calibration, Config, Error, Fit, Method, Quality, Real, Report, Samp
 
 use finish::{finish, judge_failure, method_step};
 use plain::plain_path;
-pub use plain::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SHAPE, CLEAN_SKEWNESS, CLEAN_TAIL};
 use robust::robust_path;
-pub use robust::{AMBIGUOUS_SCORE, DOUBT_LACK_OF_FIT};
 
 /// Calibrates from a slice of raw samples, in precision `T`.
 ///
@@ -98,10 +96,10 @@ pub(super) enum Route {
     Plain,
     /// The robust path's: outlier handling is on, and the plain path
     /// refused, failed, or its fit is not clean: residuals with heavy tails
-    /// or pulled inwards in the method's first pass ([`CLEAN_KURTOSIS`],
-    /// [`CLEAN_SKEWNESS`]), a residual beyond [`CLEAN_LIMIT`] robust
+    /// or pulled inwards in the method's first pass (`CLEAN_KURTOSIS`,
+    /// `CLEAN_SKEWNESS`), a residual beyond [`CLEAN_LIMIT`] robust
     /// sigmas, an RMS beyond [`CLEAN_TAIL`] of them, a lack of fit beyond
-    /// its limit, or an LS fit misshapen beyond [`CLEAN_SHAPE`].
+    /// its limit, or an LS fit misshapen beyond `CLEAN_SHAPE`.
     Robust,
 }
 
@@ -117,7 +115,7 @@ pub(super) struct Start<'r, T: Real> {
 
 /// Step 1 on the moments: the LS fit, and the quadric gap of the same
 /// scatter (judged after the method, against its radial RMS; see
-/// [`quality::REFUSE_QUADRIC_GAP`](crate::quality::REFUSE_QUADRIC_GAP)). Out of line, so the 10x10 scatter
+/// `REFUSE_QUADRIC_GAP`). Out of line, so the 10x10 scatter
 /// takes stack only while it is used.
 #[inline(never)]
 pub(crate) fn ls_step<T: Real>(

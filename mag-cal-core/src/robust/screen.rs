@@ -4,9 +4,9 @@
 //! Before any fit sees them, samples far from the cloud are screened out:
 //!
 //! 1. a coordinate-wise median centre `c`, from nested histograms per axis
-//!    (nested linear histograms) of a subsample ([`SUBSAMPLE_ROWS`]): each
+//!    (nested linear histograms) of a subsample (`SUBSAMPLE_ROWS`): each
 //!    pass narrows every axis's window to the bins holding its middle
-//!    half, until that half spans at least [`RESOLVED_BINS`] bins (1-2
+//!    half, until that half spans at least `RESOLVED_BINS` bins (1-2
 //!    passes on data without wild values, 3-4 with values 100 times the
 //!    field away). The first of these passes also finds the clip levels:
 //!    an axis's extreme value that many rows share (one more pass over
@@ -18,7 +18,7 @@
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
 //!    of the samples kept, giving the band around the sphere that holds
-//!    [`CRUDE_SHARE`] of them (the crude LS start fits only those, which
+//!    `CRUDE_SHARE` of them (the crude LS start fits only those, which
 //!    escapes a displaced patch of the trajectory) and the sphere's own
 //!    robust fit error (the refusal figure when no ellipsoid can be fitted
 //!    at all: a device lying still, a noise ball).
@@ -29,10 +29,10 @@
 //!    step 2 leaves out the far side (on such a real recording, 37 % of
 //!    the samples, and the fit was refused as planar). When the ball
 //!    leaves out at least a sixteenth more of the rows within
-//!    [`RECENTRE_RADIUS`]` m` than it holds ([`RECENTRE_MORE_ROWS`]), an
+//!    `RECENTRE_RADIUS`` m` than it holds (`RECENTRE_MORE_ROWS`), an
 //!    algebraic (Kasa) sphere fit of those rows gives a second centre
 //!    (three more passes), which replaces the median centre when its
-//!    sphere's fit error is less than half ([`RECENTRE_GAIN`]) and its
+//!    sphere's fit error is less than half (`RECENTRE_GAIN`) and its
 //!    ball holds that many more rows. Wild rows lie beyond the radius, so
 //!    contaminated data with even coverage do not pay for it.
 //!
@@ -44,87 +44,21 @@ use crate::numerics::linalg::{larger, smaller};
 use crate::numerics::sphere::CentreFit;
 use crate::sample::Sample;
 use crate::steps::normalize::{Normalization, Scan};
-use crate::steps::rules::{
-    check, count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE,
+use crate::steps::rules::{check, count_drops, every, pieces, Ball, Drops, Gate, Rules};
+use crate::tuning::{
+    CLIP_HINT_ROWS, CLIP_MIN_ROWS, CLIP_SHARE, CRUDE_SHARE, MAX_LEVELS, RECENTRE_GAIN,
+    RECENTRE_MORE_ROWS, RECENTRE_RADIUS, RESOLVED_BINS, SCREEN_RADIUS, SUBSAMPLE_ROWS,
 };
 use crate::Real;
 
-/// Samples farther from the median centre than this many median distances
-/// are screened out. A sphere's samples lie at most 1 median distance (plus
-/// noise) from its centre, an ellipsoid of axis ratio 4 (the largest
-/// distortion accepted) at most 2.
-pub const SCREEN_RADIUS: f64 = 2.5;
-/// The share of the screened samples, closest to the crude sphere, that
-/// the crude LS start fits.
-pub const CRUDE_SHARE: f64 = 0.7;
-/// The median is resolved when the middle half of an axis spans this many
-/// bins: its bins are then at most a sixteenth of that axis's
-/// inter-quartile range, and the interpolated median is closer still.
-pub const RESOLVED_BINS: usize = 16;
-/// Cap on the nested histogram passes.
-pub const MAX_LEVELS: u32 = 12;
-/// The algebraic sphere fit that may replace the median centre sees the
-/// rows within this many median distances of it: the far side of a sphere
-/// whose samples crowd on one side (median distance down to a third of the
-/// radius, the median centre near the crowded side) is within 6.
-pub const RECENTRE_RADIUS: f32 = 6.0;
-/// The algebraic sphere replaces the median centre's only where the
-/// median centre is clearly off: its robust shell error is below this
-/// fraction of the median centre's, and its ball holds more rows (see
-/// [`RECENTRE_MORE_ROWS`]). Elsewhere the median centre's robustness to
-/// wild rows is kept.
-pub const RECENTRE_GAIN: f64 = 0.5;
-/// ... at least `1 / RECENTRE_MORE_ROWS` (a sixteenth) more rows than the
-/// median centre's ball: the far side of a sphere that the median
-/// centre's ball left out. The algebraic sphere is only fitted when the
-/// median centre's ball leaves out that many of the rows within
-/// [`RECENTRE_RADIUS`] median distances, which wild rows (beyond that
-/// radius) do not: contaminated data with even coverage pay nothing. On a
-/// cap, whose rows the median centre's ball holds all of, the median
-/// centre stays (the coverage refusal then names the cause).
-pub const RECENTRE_MORE_ROWS: u32 = 16;
-
-/// The median centre's histograms (with the candidate clip levels), the
-/// median distance, the shell band and the crude start, and the robust LS
-/// refits before the last one (which also find the runs of rejected rows,
-/// [`crate::robust::runs`]), run on a fixed subsample of about this many rows
-/// (every `k`-th row, `k` at least 1). A quantile or the set of outliers
-/// is settled as well on a few hundred rows as on all of them, at a
-/// fraction of the passes' cost. The bounds of the first median-centre
-/// window come from it too; the count that confirms a clip level and the
-/// last refit see every row. The median centre's first histogram on every
-/// row instead cost about 125 instructions a row on a Cortex-M4F (LS9 +
-/// ADC2, n = 1000, a tenth of the rows displaced: 1.74 M -> 1.67 M
-/// instructions) and the contamination study's f32 runs silently wrong
-/// moved from 15 to 14 of 18 688.
-pub const SUBSAMPLE_ROWS: usize = 256;
-
-/// The subsample stride for `rows` rows ([`SUBSAMPLE_ROWS`]).
+/// The subsample stride for `rows` rows (`SUBSAMPLE_ROWS`).
 pub(crate) fn stride(rows: usize) -> usize {
     (rows / SUBSAMPLE_ROWS).max(1)
 }
 
-/// The plain path is not tried when an extreme of an axis is shared by at
-/// least this many rows of the subsample (every `k`-th row,
-/// [`SUBSAMPLE_ROWS`]) that the scan's rules keep, and by at most half of
-/// them: a clip level may lie there (the clip rule drops an extreme that
-/// a sixty-fourth of all the rows share), and only screening looks for
-/// one. Rows clipped a little inside the sphere (a range that ends just
-/// below the field) bend the plain fit without standing out of its
-/// residuals: with 2 % of the rows clipped so, the plain fit passed as
-/// clean in 4 of 5 runs of the contamination study, with median error
-/// ratios of 1.35 / 1.52 to the fit of the clean rows (1.02 / 1.04 with
-/// this hint). Of 1000 rows the subsample holds a third. Measured on the
-/// study's clean runs (1000 and 600 rows, 415 counts or 52 uT, 1 % noise):
-/// 3 rows sent 4 of 128 integer runs past the plain fit, 4 none of 256;
-/// every run with 2 % of the rows clipped at one level went to screening,
-/// about half of those with 1 %. Cost on a Cortex-M4F: about 47
-/// instructions a subsampled row (LS9 + ADC2 at n = 1000: about +15 600).
-pub const CLIP_HINT_ROWS: u32 = 4;
-
 /// Whether an extreme of an axis over the subsample (every
 /// [`stride`]`(used)`-th row that `gate` passes) is shared by at least
-/// [`CLIP_HINT_ROWS`] of its rows and at most half of them: one pass over
+/// `CLIP_HINT_ROWS` of its rows and at most half of them: one pass over
 /// the subsample (about 47 instructions a subsampled row on a Cortex-M4F
 /// when no rule drops a row).
 #[inline(never)]
@@ -221,7 +155,7 @@ pub(crate) struct Screening<T: Real> {
     /// The normalisation of the robust path: median centre, scale `m`.
     pub norm: Normalization<T>,
     /// Half-width of the band `| |y - c| - m | <= band` that holds
-    /// [`CRUDE_SHARE`] of the screened samples, sensor units.
+    /// `CRUDE_SHARE` of the screened samples, sensor units.
     pub band: T,
     /// Robust fit error of the crude sphere:
     /// `1.4826 median | |y - c| / m - 1 |` over the screened samples.
@@ -346,7 +280,7 @@ struct Shell<T: Real> {
     m: T,
     /// The screening ball, radius [`SCREEN_RADIUS`]` m`.
     ball: Ball<T>,
-    /// Half-width of the band holding [`CRUDE_SHARE`] of the rows inside
+    /// Half-width of the band holding `CRUDE_SHARE` of the rows inside
     /// the ball, sensor units.
     band: T,
     /// `1.4826 median | |y - c| / m - 1 |` over the rows inside the ball.
@@ -393,12 +327,12 @@ fn shell<T: Real, S: Sample>(
 /// when it has none; and the passes it took (two, subsampled).
 ///
 /// Kasa's fit (the running sphere fit of [`crate::numerics::sphere`]) over
-/// the subsampled rows within [`RECENTRE_RADIUS`]` m` of the median centre
+/// the subsampled rows within `RECENTRE_RADIUS`` m` of the median centre
 /// `c`, in units of `m` about `c` (so that `f32` suffices whatever the
 /// offset): exact for samples on any part of a sphere, however unevenly
 /// the device dwelt. Its least-squares weights make it sensitive to wild
 /// rows inside that ball, which is why it only replaces the median centre
-/// when it fits the shell better ([`RECENTRE_GAIN`]). Out of line, as
+/// when it fits the shell better (`RECENTRE_GAIN`). Out of line, as
 /// [`shell`].
 #[inline(never)]
 fn recentre<T: Real, S: Sample>(
@@ -469,7 +403,7 @@ fn kasa_rows<T: Real, S: Sample>(
 
 /// The coordinate-wise median of the rows the scan's rules keep, the mean
 /// of the axes' inter-quartile ranges, the rules with the clip levels found
-/// in the first pass (rows at the scan's extremes, [`crate::steps::rules::CLIP_SHARE`]),
+/// in the first pass (rows at the scan's extremes, `CLIP_SHARE`),
 /// and the passes it took.
 fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
     let rows = Gate {
@@ -615,8 +549,8 @@ fn fill_first<T: Real, S: Sample>(
 }
 
 /// The candidate clip levels: an axis's extreme value that at least
-/// [`crate::steps::rules::CLIP_SHARE`] of the `used` rows of the subsample (and
-/// [`crate::steps::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
+/// `CLIP_SHARE` of the `used` rows of the subsample (and
+/// `CLIP_MIN_ROWS`) share, but not most of them: an axis
 /// that hardly varies (planar data) is no clipping ([`confirm_levels`]
 /// counts them on every row).
 fn clip_levels<T: Real>(
@@ -645,8 +579,8 @@ fn clip_levels<T: Real>(
 }
 
 /// Keeps the candidate clip levels (`levels`, `T::MAX` for none) that
-/// at least [`crate::steps::rules::CLIP_SHARE`] of the `used` rows `gate`
-/// passes (and [`crate::steps::rules::CLIP_MIN_ROWS`]) share exactly, but not
+/// at least `CLIP_SHARE` of the `used` rows `gate`
+/// passes (and `CLIP_MIN_ROWS`) share exactly, but not
 /// most of them: one pass over every row, only when there is a
 /// candidate. Returns the passes taken. The candidates come from a
 /// subsample, whose counts are too few to decide: on a real recording
@@ -680,8 +614,8 @@ fn confirm_levels<T: Real, S: Sample>(
 }
 
 /// The rows a clip level needs of `rows` rows:
-/// [`crate::steps::rules::CLIP_SHARE`] of them, and at least
-/// [`crate::steps::rules::CLIP_MIN_ROWS`] (in integers: no soft-float `f64` on
+/// `CLIP_SHARE` of them, and at least
+/// `CLIP_MIN_ROWS` (in integers: no soft-float `f64` on
 /// the target).
 fn clip_rows(rows: usize) -> usize {
     const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
