@@ -151,6 +151,55 @@ impl Thresholds {
         refuse_lack_of_fit: REFUSE_LACK_OF_FIT as f32,
         refuse_skewness: REFUSE_SKEWNESS as f32,
     };
+
+    /// Checks every limit once, before a fit uses them: each must be a
+    /// number in its range (shares, flatness and coverage in `[0, 1]`,
+    /// condition limits at least 1, the others at least 0; infinity is
+    /// allowed and turns a check off; the skewness limit may be any number).
+    /// [`calibrate`](crate::calibrate) calls it first; a NaN limit would
+    /// otherwise pass or refuse every fit unseen.
+    ///
+    /// ```
+    /// use mag_cal_core::{Error, Thresholds};
+    /// assert!(Thresholds::DEFAULT.validate().is_ok());
+    /// let t = Thresholds { refuse_fit_error: f32::NAN, ..Thresholds::DEFAULT };
+    /// assert_eq!(t.validate(), Err(Error::InvalidConfig { field: "refuse_fit_error" }));
+    /// ```
+    #[inline]
+    pub fn validate(&self) -> Result<(), Error> {
+        const INF: f32 = f32::INFINITY;
+        let t = self;
+        // One check after the other, not a loop over a table: with a
+        // constant `Config` every check folds away (a loop over a table
+        // kept 716 B in the firmware's footprint build).
+        check("refuse_flatness", t.refuse_flatness, 0.0, 1.0)?;
+        check("warn_flatness", t.warn_flatness, 0.0, 1.0)?;
+        check("refuse_quadric_gap", t.refuse_quadric_gap, 0.0, INF)?;
+        check("gap_noise_limit", t.gap_noise_limit, 0.0, INF)?;
+        check("warn_quadric_gap", t.warn_quadric_gap, 0.0, INF)?;
+        check("refuse_distortion", t.refuse_distortion, 1.0, INF)?;
+        check("refuse_coverage", t.refuse_coverage, 0.0, 1.0)?;
+        check("warn_gram_condition", t.warn_gram_condition, 1.0, INF)?;
+        check("refuse_field_deviation", t.refuse_field_deviation, 0.0, INF)?;
+        check("warn_spread_over_noise", t.warn_spread_over_noise, 0.0, INF)?;
+        check("refuse_fit_error", t.refuse_fit_error, 0.0, INF)?;
+        check("warn_fit_error", t.warn_fit_error, 0.0, INF)?;
+        check("refuse_outlier_share", t.refuse_outlier_share, 0.0, 1.0)?;
+        check("refuse_lack_of_fit", t.refuse_lack_of_fit, 0.0, INF)?;
+        check("refuse_skewness", t.refuse_skewness, -INF, INF)?;
+        Ok(())
+    }
+}
+
+/// `Ok` when `value` lies in `lo..=hi` (NaN does not), else the refusal
+/// naming `field`.
+#[inline(always)]
+fn check(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), Error> {
+    if value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig { field })
+    }
 }
 
 impl Default for Thresholds {
@@ -842,6 +891,73 @@ mod tests {
 
     extern crate std;
     use std::string::ToString;
+
+    /// A limit that is NaN or out of its range is refused before any pass,
+    /// naming its field; the defaults and infinite limits (a check turned
+    /// off) pass.
+    #[test]
+    fn thresholds_are_validated_before_the_fit() {
+        let sphere: [[f32; 3]; 200] = core::array::from_fn(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 200.0;
+            let (r, phi) = ((1.0 - z * z).sqrt(), i as f32 * 2.399_963);
+            [
+                40.0 * r * phi.cos() + 5.0,
+                40.0 * r * phi.sin(),
+                40.0 * z - 3.0,
+            ]
+        });
+        let fit = |thresholds| {
+            let config = crate::Config {
+                thresholds,
+                ..crate::Config::DEFAULT
+            };
+            crate::calibrate::<f32, _>(&sphere, &config)
+        };
+        assert!(fit(Thresholds::DEFAULT).is_ok());
+        let off = Thresholds {
+            refuse_fit_error: f32::INFINITY,
+            refuse_skewness: f32::NEG_INFINITY,
+            ..Thresholds::DEFAULT
+        };
+        assert!(fit(off).is_ok());
+        let cases = [
+            (
+                "refuse_fit_error",
+                Thresholds {
+                    refuse_fit_error: f32::NAN,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "refuse_outlier_share",
+                Thresholds {
+                    refuse_outlier_share: 1.5,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "refuse_distortion",
+                Thresholds {
+                    refuse_distortion: 0.5,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "warn_flatness",
+                Thresholds {
+                    warn_flatness: -0.1,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+        ];
+        for (field, t) in cases {
+            assert_eq!(
+                fit(t).err(),
+                Some(Error::InvalidConfig { field }),
+                "{field}"
+            );
+        }
+    }
 
     /// An `f64` figure within 1e-12 of its limit rounds to the limit in
     /// `f32`: the refusal and the warning carry the next `f32` beyond it,
