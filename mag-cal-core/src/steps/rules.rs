@@ -319,12 +319,6 @@ impl<T: Real> Gate<T> {
 /// (no rule, no screening, no row before to track: 20-40 instructions a
 /// sample less on a Cortex-M4F in each pass).
 pub(crate) trait Filter<T: Real> {
-    /// A gated pass (rules to apply, or the robust path's screening): the
-    /// final pass also sums the cubes of the residuals, which only the
-    /// robust path reports ([`crate::judge::quality::Quality::skewness`]); the
-    /// loop over every finite row of clean data does not pay for them.
-    const ROBUST: bool = false;
-
     /// The rows of `block` the filter passes; `prev` is the row before the
     /// block in the whole slice.
     fn rows<'a, S: Sample>(
@@ -352,8 +346,6 @@ impl<T: Real> Filter<T> for Finite {
 }
 
 impl<T: Real> Filter<T> for Gate<T> {
-    const ROBUST: bool = true;
-
     #[inline(always)]
     fn rows<'a, S: Sample>(
         &'a self,
