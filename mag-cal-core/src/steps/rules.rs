@@ -281,15 +281,6 @@ impl<T: Real> Gate<T> {
     /// data take the plain loops, [`Finite`], and do not pay it).
     #[inline(never)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
-        self.pass_inlined(sample, prev)
-    }
-
-    /// [`Gate::pass`] inlined into its caller: for a loop that runs at the
-    /// deepest stack, where the call's frame (32 bytes, and 16 for the
-    /// result) would add to the stack's high-water mark (the method's
-    /// artificial-data pass under the robust path's weights).
-    #[inline(always)]
-    pub(crate) fn pass_inlined<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
         let y = check::<T, S>(sample, prev, &self.rules).ok()?;
         match &self.screen {
             Some(ball) if !ball.contains(y) => None,
