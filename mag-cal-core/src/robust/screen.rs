@@ -177,10 +177,9 @@ fn shared_extreme<T: Real, S: Sample>(
         extremes(y[1], &mut x1);
         extremes(y[2], &mut x2);
     }
-    [x0, x1, x2]
+    [x0.2, x0.3, x1.2, x1.3, x2.2, x2.3]
         .iter()
-        .flat_map(|x| [x.2, x.3])
-        .any(|n| n >= CLIP_HINT_ROWS && n <= rows / 2)
+        .any(|&n| n >= CLIP_HINT_ROWS && n <= rows / 2)
 }
 
 /// Updates an axis's `(smallest, largest, rows at the smallest, rows at
@@ -578,7 +577,7 @@ fn confirm_levels<T: Real, S: Sample>(
     used: usize,
     levels: &mut [[T; 2]; 3],
 ) -> u32 {
-    if !levels.iter().flatten().any(|l| l.abs() < T::MAX) {
+    if !levels.as_flattened().iter().any(|l| l.abs() < T::MAX) {
         return 0;
     }
     let mut shared = [[0usize; 2]; 3];
@@ -588,7 +587,11 @@ fn confirm_levels<T: Real, S: Sample>(
             n[1] += usize::from(v == l[1]);
         }
     });
-    for (l, &n) in levels.iter_mut().flatten().zip(shared.iter().flatten()) {
+    for (l, &n) in levels
+        .as_flattened_mut()
+        .iter_mut()
+        .zip(shared.as_flattened())
+    {
         if !shared_by_many(n, used) {
             *l = T::MAX;
         }

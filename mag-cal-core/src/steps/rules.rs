@@ -178,7 +178,7 @@ impl<T: Real> Rules<T> {
         Self {
             glitches: true,
             clip,
-            clipping: clip.iter().flatten().any(|l| l.abs() < T::MAX),
+            clipping: clip.as_flattened().iter().any(|l| l.abs() < T::MAX),
         }
     }
 
