@@ -95,7 +95,6 @@ impl<T: Real> Moments<T> {
     /// loop (design document, section 13).
     pub fn accumulate<S: Sample>(samples: &[S], norm: &Normalization<T>) -> Self {
         let mut sums = [T::zero(); COUNT];
-        let (low, high) = sums.split_at_mut(LOW);
         for block in samples.chunks(BLOCK) {
             // The finite rows, marked for the gated pass's block sums
             // (their own copy of the two loops took 572 bytes of flash
@@ -110,14 +109,7 @@ impl<T: Real> Moments<T> {
                     }
                 }
             }
-            let mut a = sum_low(block, norm, &mask);
-            a[0] = T::from_count(kept);
-            for (t, v) in low.iter_mut().zip(a) {
-                *t += v;
-            }
-            for (t, v) in high.iter_mut().zip(sum_high(block, norm, &mask)) {
-                *t += v;
-            }
+            add_block(&mut sums, block, norm, &mask, kept);
         }
         Self { sums }
     }
@@ -174,7 +166,6 @@ impl<T: Real> Moments<T> {
         };
         let mut finder = runs.map(|r| RunFinder::new(r, stride));
         let mut sums = [T::zero(); COUNT];
-        let (low, high) = sums.split_at_mut(LOW);
         for (start, prev, block) in skip.pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
             let kept = select(
@@ -187,14 +178,7 @@ impl<T: Real> Moments<T> {
                 stride,
                 finder.as_mut().map(|f| (start, strong, f)),
             );
-            let mut a = sum_low(block, norm, &mask);
-            a[0] = T::from_count(kept);
-            for (t, v) in low.iter_mut().zip(a) {
-                *t += v;
-            }
-            for (t, v) in high.iter_mut().zip(sum_high(block, norm, &mask)) {
-                *t += v;
-            }
+            add_block(&mut sums, block, norm, &mask, kept);
         }
         if let Some(f) = finder {
             f.finish(samples.len());
@@ -362,6 +346,28 @@ fn for_marked<T: Real, S: Sample>(
                 add((x - c.x) * is, (y - c.y) * is, (z - c.z) * is);
             }
         }
+    }
+}
+
+/// Adds the sums of the rows of `block` marked in `mask` (`kept` of them)
+/// to `sums`: the block sums of the plain and the gated pass, one copy
+/// (one copy each took 136 bytes of flash more, LS9 + ADC2).
+#[inline(never)]
+fn add_block<T: Real, S: Sample>(
+    sums: &mut [T; COUNT],
+    block: &[S],
+    norm: &Normalization<T>,
+    mask: &[u32; MASK_WORDS],
+    kept: usize,
+) {
+    let (low, high) = sums.split_at_mut(LOW);
+    let mut a = sum_low(block, norm, mask);
+    a[0] = T::from_count(kept);
+    for (t, v) in low.iter_mut().zip(a) {
+        *t += v;
+    }
+    for (t, v) in high.iter_mut().zip(sum_high(block, norm, mask)) {
+        *t += v;
     }
 }
 
