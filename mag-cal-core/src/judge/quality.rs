@@ -544,6 +544,7 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
 /// [`quadric_gap`] of the moments' scatter, `None` when it cannot be
 /// computed. Out of line: the scatter takes stack only while it is used.
 #[inline(never)]
+#[cfg(feature = "robust")]
 pub(crate) fn moments_gap<T: Real>(m: &Moments<T>) -> Option<T> {
     quadric_gap(&m.scatter()).ok()
 }

@@ -101,8 +101,11 @@ pub(crate) struct SymEigen<T, const N: usize> {
     pub vectors: Mat<T, N>,
 }
 
+// For `planar` (with `robust`) and the LS variants svd10 and lg10.
+#[cfg(any(feature = "robust", feature = "svd10", feature = "lg10"))]
 impl<T: Real, const N: usize> SymEigen<T, N> {
     /// Index of the smallest eigenvalue.
+    #[cfg(any(feature = "robust", feature = "svd10"))]
     pub fn argmin(&self) -> usize {
         let mut k = 0;
         for i in 1..N {
@@ -114,6 +117,7 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
     }
 
     /// Index of the largest eigenvalue.
+    #[cfg(any(feature = "robust", feature = "lg10"))]
     pub fn argmax(&self) -> usize {
         let mut k = 0;
         for i in 1..N {
@@ -125,12 +129,14 @@ impl<T: Real, const N: usize> SymEigen<T, N> {
     }
 
     /// The eigenvector of the smallest eigenvalue.
+    #[cfg(any(feature = "robust", feature = "svd10"))]
     pub fn min_vector(&self) -> [T; N] {
         let k = self.argmin();
         self.vectors.get(k).copied().unwrap_or([T::zero(); N])
     }
 
     /// The eigenvector of the largest eigenvalue.
+    #[cfg(any(feature = "robust", feature = "lg10"))]
     pub fn max_vector(&self) -> [T; N] {
         let k = self.argmax();
         self.vectors.get(k).copied().unwrap_or([T::zero(); N])

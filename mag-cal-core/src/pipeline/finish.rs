@@ -6,16 +6,20 @@ use super::*;
 pub(super) struct Finished<T: Real> {
     pub(super) fit: Fit<T>,
     /// The final pass's largest residual.
+    #[cfg(feature = "robust")]
     pub(super) final_max: T,
     /// The lack of fit is beyond its limit (`Figures::misfit`).
+    #[cfg(feature = "robust")]
     pub(super) misfit: bool,
     /// The LS fit alone: its lack of shape is beyond [`CLEAN_SHAPE`] fit
     /// errors.
+    #[cfg(feature = "robust")]
     pub(super) misshapen: bool,
     /// The radial residuals have heavier tails than noise: their RMS is
     /// above [`CLEAN_TAIL`](crate::CLEAN_TAIL) robust sigmas, and above the level of
     /// rounding (`sqrt(eps)` of the field), where the tails are the
     /// rounding's own.
+    #[cfg(feature = "robust")]
     pub(super) heavy_tails: bool,
 }
 
@@ -165,12 +169,16 @@ pub(super) fn finish<T: Real, S: Sample>(
             calibration,
             report,
         },
+        #[cfg(feature = "robust")]
         final_max: last.max_residual,
         // (Ablation, docs/robustness.md: `misfit-gate` and `heavy-tails`
         // leave these out of the plain fit's cleanness.)
+        #[cfg(feature = "robust")]
         misfit: !cfg!(mag_cal_ablate = "misfit-gate") && figures.misfit(&config.thresholds),
+        #[cfg(feature = "robust")]
         misshapen: config.method == Method::Ls
             && last.lack_of_shape > last.fit_error * T::lit(CLEAN_SHAPE),
+        #[cfg(feature = "robust")]
         heavy_tails: !cfg!(mag_cal_ablate = "heavy-tails")
             && last.radial_rms > last.fit_error * T::lit(CLEAN_TAIL)
             && last.radial_rms * last.radial_rms > T::EPSILON,

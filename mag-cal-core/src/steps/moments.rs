@@ -206,6 +206,7 @@ impl<T: Real> Moments<T> {
 
     /// `n sum|x|^4 / (sum|x|^2)^2`: 1 for samples on a sphere about the
     /// origin, large when a few samples lie far out.
+    #[cfg(feature = "robust")]
     pub fn kurtosis(&self) -> T {
         let two = T::lit(2.0);
         let m2 = self.get(2, 0, 0) + self.get(0, 2, 0) + self.get(0, 0, 2);

@@ -63,6 +63,7 @@ pub(crate) struct Scan<T: Real> {
 /// most about 1.8 for an ellipsoid of axis ratio 4 (the largest distortion
 /// accepted), 1.7 for a Gaussian blob; one wild sample at `D` spreads among
 /// `n` adds about `D^4 / n`. It costs nothing: the LS moments hold it.
+#[cfg(feature = "robust")]
 pub(crate) const GROSS_KURTOSIS: f64 = 3.0;
 
 /// One pass over the samples: applies the drop rules (the glitch rules

@@ -142,8 +142,10 @@ fn overflow_limit<T: Real>() -> T {
 /// least this share of the rows (and at least [`CLIP_MIN_ROWS`]). One
 /// sixty-fourth: on a clean integer recording the extreme of an axis is
 /// shared by a few rows at most (a 50-count field, 1000 rows: about 5).
+#[cfg(feature = "robust")]
 pub const CLIP_SHARE: f64 = 1.0 / 64.0;
 /// See [`CLIP_SHARE`].
+#[cfg(feature = "robust")]
 pub const CLIP_MIN_ROWS: usize = 5;
 
 /// The glitch rules, as one pass applies them.

@@ -6,7 +6,6 @@ use nalgebra::{Matrix3, Vector3};
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::larger;
 use crate::robust::runs::Runs;
-use crate::robust::screen::MAD_TO_SIGMA;
 use crate::sample::Sample;
 use crate::steps::artificial::{Pass, Residuals, Stats};
 use crate::steps::ellipsoid::Ellipsoid;
@@ -249,6 +248,10 @@ fn measured_stats<T: Real, S: Sample>(
     let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
     Ok(Some((stats, robust_sigma(&res.hist), res.max)))
 }
+
+/// `1 / Phi^-1(3/4)`: a standard deviation from the median absolute value
+/// of a normal variable.
+pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// The robust standard deviation `1.4826 median|r|` of the residuals
 /// counted in `hist`, floored at `1024 eps` (below it rounding, not noise,
