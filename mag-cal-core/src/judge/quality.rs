@@ -355,7 +355,9 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     }
     if f.robust {
         // (Ablation, docs/robustness.md: `filled-cloud` refuses no skewness.)
-        if !cfg!(mag_cal_ablate = "filled-cloud")
+        // Without outlier handling no pass measures the skewness: it is 0.
+        if cfg!(feature = "robust")
+            && !cfg!(mag_cal_ablate = "filled-cloud")
             && below(Some(f.skewness), th.refuse_skewness)
             && above(f.fit_error, th.warn_fit_error)
         {

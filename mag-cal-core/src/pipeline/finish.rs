@@ -55,13 +55,20 @@ pub(super) fn finish<T: Real, S: Sample>(
     // The rows the estimate used: with weights, those within the cut of the
     // method's last pass (lagged, as its weights); for LS alone, the robust
     // LS's own cut; subMLE used every row inside the screening.
-    let sigma = match (start.weights.sigma, est.sigma) {
-        (None, _) => None,
-        (Some(_), Some(s)) => Some(s),
-        (Some(s), None) if config.method == Method::Ls => Some(s),
-        (Some(_), None) => None,
+    // Without outlier handling no weights (`weights.sigma` is never set):
+    // every row the rules keep is used.
+    #[cfg(not(feature = "robust"))]
+    let limit: Option<T> = None;
+    #[cfg(feature = "robust")]
+    let limit = {
+        let sigma = match (start.weights.sigma, est.sigma) {
+            (None, _) => None,
+            (Some(_), Some(s)) => Some(s),
+            (Some(s), None) if config.method == Method::Ls => Some(s),
+            (Some(_), None) => None,
+        };
+        sigma.map(|s| s * T::lit(methods::OUTLIER_CUT))
     };
-    let limit = sigma.map(|s| s * T::lit(methods::OUTLIER_CUT));
     let last = match final_pass::final_pass(
         samples,
         norm,
@@ -79,18 +86,26 @@ pub(super) fn finish<T: Real, S: Sample>(
     // The rows of the spans beside runs, which the passes skipped: those
     // the gate passes count as rejected, and those of them within the cut
     // are no outliers.
-    let (gate, runs) = (&start.weights.gate, start.weights.runs);
-    let mut spanned = 0usize;
+    // (Without outlier handling there are no runs: `weights.runs` is
+    // always empty.)
+    let runs = start.weights.runs;
     figures.beside = 0;
-    runs.visit(samples, |s, prev| {
-        if let Some(y) = gate.pass(s, prev) {
-            spanned += 1;
-            let within = limit.is_none_or(|l| {
-                (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
-            });
-            figures.beside += usize::from(within);
-        }
-    });
+    #[cfg(not(feature = "robust"))]
+    let spanned = 0usize;
+    #[cfg(feature = "robust")]
+    let spanned = {
+        let mut spanned = 0usize;
+        runs.visit(samples, |s, prev| {
+            if let Some(y) = start.weights.gate.pass(s, prev) {
+                spanned += 1;
+                let within = limit.is_none_or(|l| {
+                    (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
+                });
+                figures.beside += usize::from(within);
+            }
+        });
+        spanned
+    };
     figures.coverage = Some(last.coverage);
     figures.gram_condition = Some(last.gram_condition);
     figures.radial_rms = Some(last.radial_rms);
@@ -108,6 +123,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     figures.lack_of_fit = Some(last.lack_of_fit);
     figures.misfit_significant = last.misfit_significant;
     // Only the robust path's pass sums the cubes.
+    #[cfg(feature = "robust")]
     if figures.robust {
         figures.skewness = last.skewness;
     }

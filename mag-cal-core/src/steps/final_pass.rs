@@ -43,6 +43,7 @@ pub(crate) struct FinalPass<T: Real> {
     pub max_residual: T,
     /// Skewness of `|u| - 1` over the rows used; meaningful only for a
     /// pass with the robust path's gate ([`Filter::ROBUST`]).
+    #[cfg(feature = "robust")]
     pub skewness: T,
 }
 
@@ -258,9 +259,13 @@ impl<T: Real> FinalSums<T> {
         };
         // The moments about zero of the rows used, then about their mean
         // (the residuals are small: no cancellation to fear).
+        #[cfg(feature = "robust")]
         let n = T::from_count(acc.used);
+        #[cfg(feature = "robust")]
         let (m1, m2, m3) = (sum / n, t[0] / n, acc.cubes / n);
+        #[cfg(feature = "robust")]
         let var = m2 - m1 * m1;
+        #[cfg(feature = "robust")]
         let skewness = if var > T::zero() {
             (m3 - T::lit(3.0) * m1 * m2 + T::lit(2.0) * m1 * m1 * m1) / (var * var.square_root())
         } else {
@@ -280,6 +285,7 @@ impl<T: Real> FinalSums<T> {
             mean_residual,
             #[cfg(feature = "robust")]
             max_residual: acc.max,
+            #[cfg(feature = "robust")]
             skewness,
         })
     }

@@ -354,7 +354,8 @@ impl<T: Real> Filter<T> for Finite {
 }
 
 impl<T: Real> Filter<T> for Gate<T> {
-    const ROBUST: bool = true;
+    // Without outlier handling nothing reads the cubes.
+    const ROBUST: bool = cfg!(feature = "robust");
 
     #[inline(always)]
     fn rows<'a, S: Sample>(
