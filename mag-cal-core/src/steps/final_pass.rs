@@ -213,7 +213,7 @@ impl<T: Real> FinalSums<T> {
         };
         let (hist, cells, acc) = (&mut self.hist, &mut self.cells, &mut self.acc);
         for (_, prev, block) in runs.pieces(samples, BLOCK) {
-            if gate.is_plain() {
+            if gate.plain_loop() {
                 final_block(block, prev, &Finite, &spec, hist, cells, acc);
             } else {
                 final_block(block, prev, gate, &spec, hist, cells, acc);
