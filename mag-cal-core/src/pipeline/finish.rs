@@ -131,6 +131,7 @@ pub(super) fn finish<T: Real, S: Sample>(
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::from_double(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
+    #[cfg(feature = "robust")]
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
@@ -168,13 +169,21 @@ pub(super) fn finish<T: Real, S: Sample>(
             // The rules every row is judged by (a pass skips the glitch
             // rules when they dropped no row: the rows are the same).
             glitch_rules: config.robust,
+            #[cfg(feature = "robust")]
             clip_levels: start
                 .weights
                 .gate
                 .rules
                 .clip
                 .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
+            #[cfg(feature = "robust")]
             screen: start.weights.gate.screen.as_ref().map(to_sensor),
+            // Without outlier handling no screening: no clip levels are
+            // found and no ball is set.
+            #[cfg(not(feature = "robust"))]
+            clip_levels: [[None; 2]; 3],
+            #[cfg(not(feature = "robust"))]
+            screen: None,
             residual_limit: limit,
             runs: *runs,
         },
