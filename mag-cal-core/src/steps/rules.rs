@@ -276,10 +276,14 @@ impl<T: Real> Gate<T> {
     /// Whether a pass over the rows the gate passes takes its plain loop
     /// ([`Finite`]): the gate is plain. Without the `robust` feature never:
     /// the scan, the moments and the final pass link their gated loops
-    /// alone (the same rows in the same order, so the same sums): LS9 +
-    /// ADC2 on a Cortex-M4F 26 808 -> 24 640 bytes of flash
-    /// (`bash bench.sh flash`), for the out-of-line [`Gate::pass`] on
-    /// every row.
+    /// alone (the same rows in the same order, so the same sums). Flash
+    /// over speed, as the plain build is for parts where flash decides:
+    /// LS9 + ADC2 on a Cortex-M4F 26 808 -> 24 640 bytes of flash
+    /// (`bash bench.sh flash`), and on 1000 clean `[i16; 3]` samples
+    /// 402 440 -> 609 360 instructions (the out-of-line [`Gate::pass`] on
+    /// every row of three passes: the scan's about 39 000, the moments'
+    /// 93 000, the final pass's 75 000, for 240, 884 and 1 044 bytes; the
+    /// bench's `adc2` line built with `--features qemu-base`).
     #[inline(always)]
     pub(crate) fn plain_loop(&self) -> bool {
         cfg!(feature = "robust") && self.is_plain()
