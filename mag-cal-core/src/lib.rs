@@ -159,8 +159,11 @@
 //! and [`Selection::classify`] tells, row by row, which rows the fit used.
 //!
 //! Steps 2-4 are the cargo feature `robust` (default). Without it (an
-//! opt-in for parts where flash decides: LS9 + ADC2 then takes about
-//! 27 KB instead of 41 KB) only the plain pipeline is compiled: step 1's
+//! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
+//! takes about 24 KB of flash instead of 41 KB and 3.8 KB of stack, but
+//! about 610 000 instructions instead of 420 000 on 1000 clean samples,
+//! as each pass keeps its gated loop only) only the plain pipeline is
+//! compiled: step 1's
 //! rules, then the plain fit, whose answer, a calibration or a refusal,
 //! is returned as it is. It keeps the glitch rules (with
 //! [`Config::robust`], still the default: zero rows, rails and repeats
