@@ -160,8 +160,8 @@
 //!
 //! Steps 2-4 are the cargo feature `robust` (default). Without it (an
 //! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
-//! takes about 24 KB of flash instead of 41 KB and 3.8 KB of stack, but
-//! about 610 000 instructions instead of 420 000 on 1000 clean samples,
+//! takes about 22 KB of flash instead of 41 KB and 3.4 KB of stack, but
+//! about 650 000 instructions instead of 420 000 on 1000 clean samples,
 //! as each pass keeps its gated loop only) only the plain pipeline is
 //! compiled: step 1's
 //! rules, then the plain fit, whose answer, a calibration or a refusal,
