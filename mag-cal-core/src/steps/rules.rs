@@ -458,7 +458,7 @@ impl<T: Real> Selection<T> {
     /// rounding for a row exactly at the limit).
     ///
     /// ```
-    /// use mag_cal_core::{calibrate, Config, SampleClass};
+    /// use mag_cal_core::{calibrate, Config, Rule, SampleClass};
     /// let mut samples: Vec<[f32; 3]> = (0..300)
     ///     .map(|i| {
     ///         let z = 1.0 - 2.0 * (i as f32 + 0.5) / 300.0;
@@ -468,10 +468,19 @@ impl<T: Real> Selection<T> {
     ///     .collect();
     /// samples[100] = [400.0, -250.0, 90.0]; // an I2C glitch
     /// samples[200] = [0.0, 0.0, 0.0]; // a failed read
-    /// let fit = calibrate::<f32, _>(&samples, &Config::default())?;
+    /// let result = calibrate::<f32, _>(&samples, &Config::default());
+    /// # // Without the `robust` feature the glitch is trusted: it bends
+    /// # // the fit, which is then refused.
+    /// # #[cfg(not(feature = "robust"))]
+    /// # {
+    /// #     assert!(matches!(result, Err(mag_cal_core::Error::NoSphere { .. })));
+    /// #     return Ok(());
+    /// # }
+    /// let fit = result?;
     /// let classes: Vec<_> = fit.report.selection.classify(&fit.calibration, &samples).collect();
     /// assert_eq!(classes.iter().filter(|c| **c == SampleClass::Used).count(), 298);
     /// assert_ne!(classes[100], SampleClass::Used);
+    /// assert_eq!(classes[200], SampleClass::Dropped(Rule::Zero));
     /// # Ok::<(), mag_cal_core::Error>(())
     /// ```
     pub fn classify<'a, S: Sample>(
