@@ -13,9 +13,13 @@
 #              and LS9 + ADC2 built for the Cortex-M0+ (thumbv6m-none-eabi,
 #              no FPU: f32 in software), the same program and profile:
 #                FOOTPRINT ls9+adc2-thumbv6m flash=<bytes> stack=<bytes> ram_per_sample=<bytes>
+#              and LS9 + ADC2 with the core built without outlier handling
+#              (its `robust` feature off: the plain pipeline), on the M4F:
+#                FOOTPRINT ls9+adc2-plain flash=<bytes> stack=<bytes> ram_per_sample=<bytes>
 #   flash      the flash of LS9 + ADC2 alone (two of the footprint's builds,
 #              no QEMU run): FOOTPRINT ls9+adc2 flash=<bytes>, as `footprint`
-#              gives it (`cargo xtask ablation` reads it)
+#              gives it (`cargo xtask ablation` reads it), then the plain
+#              build's: FOOTPRINT ls9+adc2-plain flash=<bytes>
 #   all        bench and footprint (the default)
 #   --verify   with `bench`/`all`: run the bench a second time single-stepped
 #              with QEMU's exec log, count every instruction between the
@@ -50,6 +54,9 @@ done
 
 out=target/thumbv7em-none-eabihf/release
 build() { cargo build --release --locked --no-default-features --features qemu --bin "$@" >&2; }
+# The core without its `robust` feature (and without the optional methods):
+# the plain pipeline alone.
+build_plain() { cargo build --release --locked --no-default-features --features qemu-base --bin "$@" >&2; }
 # The Cortex-M0+ build (ARMv6-M, no FPU): f32 arithmetic is compiler-builtins'
 # software routines (`__aeabi_fadd`, ...), linked in and counted in the flash.
 v6m=thumbv6m-none-eabi
@@ -233,8 +240,8 @@ run_footprint() {
     # added (the `all` build, every feature).
     local feature f
     for feature in none adc1 adc2-iter submle svd10 lg10; do
-        local features=qemu-base
-        [ "$feature" = none ] || features="qemu-base,mag-cal-core/$feature"
+        local features=qemu-base,mag-cal-core/robust
+        [ "$feature" = none ] || features="$features,mag-cal-core/$feature"
         MAG_CAL_FOOTPRINT=all cargo build --release --locked --no-default-features \
             --features "$features" --bin footprint >&2
         f=$(flash_of "$out/footprint")
@@ -259,6 +266,23 @@ run_footprint() {
     sed "s/^/# $v6m: /" "$log"
     echo "FOOTPRINT ls9+adc2-thumbv6m flash=$((flash[ls9+adc2-$v6m] - flash[baseline-$v6m])) stack=$(stack_of adc2 "$log") ram_per_sample=$(ram_of "$log")"
     rm -f "$log"
+    # LS9 + ADC2 with the core's plain pipeline (no `robust`): the same
+    # builds with the core's features off, over the baseline built so too.
+    # The stack run's contaminated samples are no refusal there either.
+    for v in baseline ls9+adc2; do
+        MAG_CAL_FOOTPRINT=$v build_plain footprint
+        cp "$out/footprint" "target/footprint/$v-plain.elf"
+        flash[$v-plain]=$(flash_of "target/footprint/$v-plain.elf")
+    done
+    echo "# flash plain (.text + .rodata, opt-level s, fat LTO): baseline=${flash[baseline-plain]} ls9+adc2=${flash[ls9+adc2-plain]} bytes"
+    echo "# flash ls9+adc2-plain over baseline, by symbol: $(attribute "target/footprint/baseline-plain.elf" "target/footprint/ls9+adc2-plain.elf")"
+    # (Every method, as the stack run calibrates with each.)
+    build_plain footprint --features mag-cal-core/all-methods
+    log=$(mktemp)
+    run_qemu "$out/footprint" >"$log"
+    sed "s/^/# plain: /" "$log"
+    echo "FOOTPRINT ls9+adc2-plain flash=$((flash[ls9+adc2-plain] - flash[baseline-plain])) stack=$(stack_of adc2 "$log") ram_per_sample=$(ram_of "$log")"
+    rm -f "$log"
 }
 
 # The FOOTPRINT ls9+adc2 flash figure of run_footprint alone.
@@ -279,6 +303,12 @@ run_flash() {
     fi
     echo "# flash (.text + .rodata, opt-level s, fat LTO): baseline=${flash[baseline]} ls9+adc2=${flash[ls9+adc2]} bytes"
     echo "FOOTPRINT ls9+adc2 flash=$((flash[ls9+adc2] - flash[baseline]))"
+    for v in baseline ls9+adc2; do
+        MAG_CAL_FOOTPRINT=$v build_plain footprint
+        flash[$v-plain]=$(flash_of "$out/footprint")
+    done
+    echo "# flash plain (.text + .rodata, opt-level s, fat LTO): baseline=${flash[baseline-plain]} ls9+adc2=${flash[ls9+adc2-plain]} bytes"
+    echo "FOOTPRINT ls9+adc2-plain flash=$((flash[ls9+adc2-plain] - flash[baseline-plain]))"
 }
 
 case $what in

@@ -41,6 +41,15 @@ pub struct Config {
     /// same estimates as before outlier handling existed (rows too large
     /// for the working precision are still dropped, and a fit error above
     /// the limit still refuses: [`Error::NoSphere`](crate::Error::NoSphere)).
+    ///
+    /// Without the cargo feature `robust` (the plain build), `true` keeps
+    /// its first part, the glitch drop rules (zero rows, rails, repeats),
+    /// and the plain fit of the rows they keep is the answer: no screening,
+    /// no weights, none of the outlier refusals. Neither ignored nor
+    /// refused: the same [`Config`] (e.g. `Config::default()`) then runs in
+    /// both builds, and where the robust build takes the plain fit (clean
+    /// data) both give the same result; dropping the glitch rules with the
+    /// feature, or refusing the default configuration, would surprise more.
     pub robust: bool,
     /// The judging limits (default [`Thresholds::DEFAULT`](crate::Thresholds::DEFAULT), the measured
     /// constants of [`quality`](crate::quality)).

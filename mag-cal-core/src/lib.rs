@@ -158,6 +158,27 @@
 //! [`Report::rejected`], [`Report::start`], [`Quality::fit_error`], [`Quality::lack_of_fit`])
 //! and [`Selection::classify`] tells, row by row, which rows the fit used.
 //!
+//! Steps 2-4 are the cargo feature `robust` (default). Without it (an
+//! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
+//! takes about 22 KB of flash instead of 41 KB and 3.4 KB of stack, but
+//! about 650 000 instructions instead of 420 000 on 1000 clean samples,
+//! as each pass keeps its gated loop only) only the plain pipeline is
+//! compiled: step 1's
+//! rules, then the plain fit, whose answer, a calibration or a refusal,
+//! is returned as it is. It keeps the glitch rules (with
+//! [`Config::robust`], still the default: zero rows, rails and repeats
+//! are dropped and counted; without the screening no clip levels are
+//! found) and every refusal of degenerate data ([`Error::Planar`],
+//! [`Error::NoSphere`], [`Error::AmbiguousQuadric`],
+//! [`Error::ExtremeDistortion`], [`Error::PoorCoverage`],
+//! [`Error::FieldStrengthMismatch`], ...), and it **trusts every row the
+//! rules keep**: a displaced stretch of rows, a magnet passing or an axis
+//! clipped below the rails bends the fit instead of being left out, and
+//! [`Error::TooManyOutliers`], [`Error::SystematicMisfit`] and
+//! [`Error::FilledCloud`] are never returned. On data the robust build
+//! finds clean (no robust pass, [`Report::robust_passes`] 0) the two
+//! builds give the same answer, bit for bit: it is the same plain path.
+//!
 //! # Around the fit
 //!
 //! [`collector`] gathers samples one at a time on the device, with
@@ -181,6 +202,12 @@
 //! variant.
 //!
 //! # Features
+//! - `robust` (default): outlier handling (see [Outliers](#outliers)):
+//!   the screening, the robust LS refits, the runs, the window starts,
+//!   and [`planar`], whose fit screens. Off, the plain pipeline alone,
+//!   trusting every row the rules keep; [`Config::robust`] then selects
+//!   the glitch rules only. The outlier constants ([`CLEAN_LIMIT`],
+//!   [`SCREEN_RADIUS`], ...) are not compiled either.
 //! - `all-methods` (default): `adc1`, `adc2-iter`, `submle` (the
 //!   methods) and `svd10`, `lg10` (the LS variants). LS, LS9 and
 //!   ADC2 are always there. Firmware that picks the method at run time
@@ -257,7 +284,9 @@ struct ReadmeDoctests;
 
 pub use calibration::Calibration;
 pub use config::Config;
-pub use device::{align, background, collector, heading, offsets, persist, planar};
+#[cfg(feature = "robust")]
+pub use device::planar;
+pub use device::{align, background, collector, heading, offsets, persist};
 pub use error::{Error, Figure};
 pub use judge::quality;
 pub use judge::quality::{Quality, RowCounts, Thresholds, Warning, Warnings};
@@ -271,10 +300,12 @@ pub use steps::ellipsoid::LsVariant;
 pub use steps::methods::Method;
 pub use steps::normalize::MIN_SAMPLES;
 pub use steps::rules::{Drops, Rule, SampleClass, Selection};
+pub use tuning::OUTLIER_CUT;
 /// The robust path's fixed cuts, for front ends that explain a fit's
 /// outliers (every tuning constant, with its evidence, is in the
 /// crate-private `tuning` module).
-pub use tuning::{CLEAN_LIMIT, CLEAN_TAIL, OUTLIER_CUT, SCREEN_RADIUS};
+#[cfg(feature = "robust")]
+pub use tuning::{CLEAN_LIMIT, CLEAN_TAIL, SCREEN_RADIUS};
 
 /// Pieces of the pipeline for this repository's benchmarks and tests
 /// (feature `bench-internals`). Not part of the API: anything here may

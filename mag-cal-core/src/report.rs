@@ -1,5 +1,6 @@
 //! How a calibration was obtained: [`Report`] and [`Fit`].
 
+#[cfg(feature = "robust")]
 use crate::robust::refit;
 use crate::{Calibration, Drops, LsVariant, Method, Quality, Real, Runs, Selection, Warnings};
 
@@ -77,12 +78,21 @@ impl<T: Real> Report<T> {
     /// # Ok::<(), mag_cal_core::Error>(())
     /// ```
     pub fn start_window(&self) -> Runs {
-        let rows = self
-            .samples_used
-            .saturating_add(self.samples_dropped)
-            .saturating_add(self.screened)
-            .saturating_add(self.rejected);
-        refit::window(usize::from(self.start), rows)
+        #[cfg(feature = "robust")]
+        {
+            let rows = self
+                .samples_used
+                .saturating_add(self.samples_dropped)
+                .saturating_add(self.screened)
+                .saturating_add(self.rejected);
+            refit::window(usize::from(self.start), rows)
+        }
+        // Without the `robust` feature no robust start is made (`start` is
+        // always 0): no rows.
+        #[cfg(not(feature = "robust"))]
+        {
+            Runs::NONE
+        }
     }
 }
 

@@ -12,6 +12,10 @@
 //! constants (`background::RECENT`, `MIN_SIGMA`, `ADOPT_RATIO`, ...) are
 //! still in `device/background.rs`.
 
+// Without outlier handling (feature `robust` off) the robust path's
+// constants are not read.
+#![cfg_attr(not(feature = "robust"), allow(dead_code))]
+
 // ---- The plain fit is taken as the robust one (routing) ----
 
 /// A plain fit is taken as the robust one when no row's residual exceeds

@@ -218,7 +218,9 @@ fn a_method_left_out_is_refused_by_its_feature() {
 
 /// A device lying still (most rows on one point): refused by the
 /// screening, naming the caller's fit-error limit, not the default one;
-/// its infinite fit error is refused whatever the limit.
+/// its infinite fit error is refused whatever the limit. (Without the
+/// `robust` feature no screening: the LS fit fails, `NotAnEllipsoid`.)
+#[cfg(feature = "robust")]
 #[test]
 fn a_still_device_names_the_configured_limit() {
     let still: Vec<[i16; 3]> = (0..200)
@@ -312,4 +314,58 @@ fn refusals_name_the_configured_limits() {
             assert!(e.to_string().contains(&format!(", limit {limit})")), "{e}");
         }
     }
+}
+
+/// Without the `robust` feature the plain pipeline answers alone: the
+/// glitch rules (with `Config::robust`, the default) drop the zero rows
+/// and the repeated ones, and every row they keep is used, displaced
+/// or not: no screening, no residual cut, no robust pass. With
+/// `Config::robust` off, the zero rows and repeats are used too.
+#[cfg(not(feature = "robust"))]
+#[test]
+fn the_plain_build_keeps_the_glitch_rules_and_trusts_every_row_they_keep() {
+    let (t, b) = truth(300.0);
+    let n = 600;
+    let mut rows: Vec<[i16; 3]> = samples(&t, &b, n)
+        .iter()
+        .map(|y| y.map(|v| v.round() as i16))
+        .collect();
+    // Every 50th row a failed read (zero), every 50th (another) a
+    // repeat of the row before, every 10th (others) displaced by 55
+    // counts on each axis.
+    let (mut zeros, mut repeats, mut displaced) = (0, 0, 0);
+    for i in 1..n {
+        match i % 50 {
+            7 => {
+                rows[i] = [0; 3];
+                zeros += 1;
+            }
+            21 => {
+                rows[i] = rows[i - 1];
+                repeats += 1;
+            }
+            k if k % 10 == 3 => {
+                rows[i] = rows[i].map(|v| v + 55);
+                displaced += 1;
+            }
+            _ => {}
+        }
+    }
+    assert!(zeros > 0 && repeats > 0 && displaced > 0);
+    let fit = calibrate::<f32, _>(&rows, &Config::default()).unwrap();
+    let r = &fit.report;
+    assert_eq!((r.drops.zero, r.drops.repeated), (zeros, repeats));
+    assert_eq!(r.samples_used, n - zeros - repeats);
+    assert_eq!((r.screened, r.rejected, r.robust_passes), (0, 0, 0));
+    assert!(r.selection.glitch_rules && r.selection.screen.is_none());
+    assert!(r.selection.residual_limit.is_none() && r.quality.outlier_share == 0.0);
+    // Without the glitch rules the zero rows and repeats are used too.
+    let plain = Config {
+        robust: false,
+        ..Config::default()
+    };
+    let fit = calibrate::<f32, _>(&rows, &plain).unwrap();
+    assert_eq!(fit.report.samples_used, n);
+    assert_eq!(fit.report.drops.total(), 0);
+    assert!(!fit.report.selection.glitch_rules);
 }

@@ -8,4 +8,6 @@ pub mod collector;
 pub mod heading;
 pub mod offsets;
 pub mod persist;
+// Its fit screens the rows (the robust path's screening).
+#[cfg(feature = "robust")]
 pub mod planar;

@@ -332,7 +332,9 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
     }
     if f.robust {
         // (Ablation, docs/robustness.md: `filled-cloud` refuses no skewness.)
-        if !cfg!(mag_cal_ablate = "filled-cloud")
+        // Without outlier handling no pass measures the skewness: it is 0.
+        if cfg!(feature = "robust")
+            && !cfg!(mag_cal_ablate = "filled-cloud")
             && below(Some(f.skewness), th.refuse_skewness)
             && above(f.fit_error, th.warn_fit_error)
         {
@@ -521,6 +523,7 @@ pub(crate) fn quadric_gap<T: Real>(scatter: &SMatrix<T, 10, 10>) -> Result<T, Er
 /// [`quadric_gap`] of the moments' scatter, `None` when it cannot be
 /// computed. Out of line: the scatter takes stack only while it is used.
 #[inline(never)]
+#[cfg(feature = "robust")]
 pub(crate) fn moments_gap<T: Real>(m: &Moments<T>) -> Option<T> {
     quadric_gap(&m.scatter()).ok()
 }

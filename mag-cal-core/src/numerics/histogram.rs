@@ -80,6 +80,7 @@ impl LogHistogram {
 
     /// Counts in the bins wholly below `x` (the bin holding `x` is left
     /// out: at most a bin's width, 9 %, short).
+    #[cfg(feature = "robust")]
     pub(crate) fn count_below<T: Real>(&self, x: T) -> u32 {
         let bits = x.to_single().abs().to_bits();
         let k = (bits >> LOG_SHIFT).saturating_sub(LOG_BASE) as usize;
@@ -129,14 +130,17 @@ fn edges<T: Real>(k: usize) -> (T, T) {
 }
 
 /// Bins per axis of [`AxisHistograms`].
+#[cfg(feature = "robust")]
 pub(crate) const AXIS_BINS: usize = 64;
 
 /// Counters per axis of [`AxisHistograms`]: the count below the window,
 /// the [`AXIS_BINS`] bins, the count above it.
+#[cfg(feature = "robust")]
 const AXIS_COUNTERS: usize = AXIS_BINS + 2;
 
 /// Three linear histograms over a window `[lo, lo + AXIS_BINS * width)` per
 /// axis, with the counts below and above the window.
+#[cfg(feature = "robust")]
 #[derive(Clone, Debug)]
 pub(crate) struct AxisHistograms<T: Real> {
     lo: [T; 3],
@@ -147,6 +151,7 @@ pub(crate) struct AxisHistograms<T: Real> {
 }
 
 /// Where a quantile of one axis lies in its window.
+#[cfg(feature = "robust")]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Place<T> {
     /// Inside bin `k` (interpolated value).
@@ -155,6 +160,7 @@ pub(crate) enum Place<T> {
     Outside,
 }
 
+#[cfg(feature = "robust")]
 impl<T: Real> AxisHistograms<T> {
     /// Empty histograms over `[lo[a], hi[a]]` per axis (`hi > lo`).
     pub(crate) fn new(lo: [T; 3], hi: [T; 3]) -> Self {
@@ -277,6 +283,7 @@ mod tests {
 
     /// Number of points counted (of the halved counters, after a
     /// halving), as axis 0 holds them.
+    #[cfg(feature = "robust")]
     fn axis_total(h: &AxisHistograms<f64>) -> u32 {
         h.counts[0].iter().map(|&c| u32::from(c)).sum()
     }
@@ -309,6 +316,7 @@ mod tests {
         assert_eq!(LogHistogram::new().quantile::<f32>(0.5), None);
     }
 
+    #[cfg(feature = "robust")]
     #[test]
     fn axis_median_and_outside() {
         let mut h = AxisHistograms::new([0.0f64; 3], [64.0; 3]);

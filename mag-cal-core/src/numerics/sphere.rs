@@ -88,6 +88,7 @@ impl CentreFit {
     }
 
     /// Whether any sample is in the sums.
+    #[cfg(feature = "robust")]
     pub(crate) fn has_samples(&self) -> bool {
         self.n > 0.0
     }

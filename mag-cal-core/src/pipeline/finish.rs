@@ -1,22 +1,27 @@
 //! The method's step and the final pass, and the judging of their figures.
 
 use super::*;
+#[cfg(feature = "robust")]
 use crate::tuning::{CLEAN_SHAPE, CLEAN_TAIL};
 
 /// A fit and what decides whether the plain one is clean.
 pub(super) struct Finished<T: Real> {
     pub(super) fit: Fit<T>,
     /// The final pass's largest residual.
+    #[cfg(feature = "robust")]
     pub(super) final_max: T,
     /// The lack of fit is beyond its limit (`Figures::misfit`).
+    #[cfg(feature = "robust")]
     pub(super) misfit: bool,
     /// The LS fit alone: its lack of shape is beyond `CLEAN_SHAPE` fit
     /// errors.
+    #[cfg(feature = "robust")]
     pub(super) misshapen: bool,
     /// The radial residuals have heavier tails than noise: their RMS is
     /// above [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL) robust sigmas, and above the level of
     /// rounding (`sqrt(eps)` of the field), where the tails are the
     /// rounding's own.
+    #[cfg(feature = "robust")]
     pub(super) heavy_tails: bool,
 }
 
@@ -52,13 +57,20 @@ pub(super) fn finish<T: Real, S: Sample>(
     // The rows the estimate used: with weights, those within the cut of the
     // method's last pass (lagged, as its weights); for LS alone, the robust
     // LS's own cut; subMLE used every row inside the screening.
-    let sigma = match (start.weights.sigma, est.sigma) {
-        (None, _) => None,
-        (Some(_), Some(s)) => Some(s),
-        (Some(s), None) if config.method == Method::Ls => Some(s),
-        (Some(_), None) => None,
+    // Without outlier handling no weights (`weights.sigma` is never set):
+    // every row the rules keep is used.
+    #[cfg(not(feature = "robust"))]
+    let limit: Option<T> = None;
+    #[cfg(feature = "robust")]
+    let limit = {
+        let sigma = match (start.weights.sigma, est.sigma) {
+            (None, _) => None,
+            (Some(_), Some(s)) => Some(s),
+            (Some(s), None) if config.method == Method::Ls => Some(s),
+            (Some(_), None) => None,
+        };
+        sigma.map(|s| s * T::lit(crate::tuning::OUTLIER_CUT))
     };
-    let limit = sigma.map(|s| s * T::lit(crate::tuning::OUTLIER_CUT));
     let last = match final_pass::final_pass(
         samples,
         norm,
@@ -76,18 +88,26 @@ pub(super) fn finish<T: Real, S: Sample>(
     // The rows of the spans beside runs, which the passes skipped: those
     // the gate passes count as rejected, and those of them within the cut
     // are no outliers.
-    let (gate, runs) = (&start.weights.gate, start.weights.runs);
-    let mut spanned = 0usize;
+    // (Without outlier handling there are no runs: `weights.runs` is
+    // always empty.)
+    let runs = start.weights.runs;
     figures.beside = 0;
-    runs.visit(samples, |s, prev| {
-        if let Some(y) = gate.pass(s, prev) {
-            spanned += 1;
-            let within = limit.is_none_or(|l| {
-                (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
-            });
-            figures.beside += usize::from(within);
-        }
-    });
+    #[cfg(not(feature = "robust"))]
+    let spanned = 0usize;
+    #[cfg(feature = "robust")]
+    let spanned = {
+        let mut spanned = 0usize;
+        runs.visit(samples, |s, prev| {
+            if let Some(y) = start.weights.gate.pass(s, prev) {
+                spanned += 1;
+                let within = limit.is_none_or(|l| {
+                    (calibration.map(y).norm_squared().square_root() - T::one()).abs() <= l
+                });
+                figures.beside += usize::from(within);
+            }
+        });
+        spanned
+    };
     figures.coverage = Some(last.coverage);
     figures.gram_condition = Some(last.gram_condition);
     figures.radial_rms = Some(last.radial_rms);
@@ -105,6 +125,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     figures.lack_of_fit = Some(last.lack_of_fit);
     figures.misfit_significant = last.misfit_significant;
     // Only the robust path's pass sums the cubes.
+    #[cfg(feature = "robust")]
     if figures.robust {
         figures.skewness = last.skewness;
     }
@@ -112,6 +133,7 @@ pub(super) fn finish<T: Real, S: Sample>(
         .expected_field_strength
         .map(|expected| calibration.field_strength() / T::from_double(expected) - T::one());
     let warnings = quality::judge(figures, &config.thresholds)?;
+    #[cfg(feature = "robust")]
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
     let quality = Quality {
         flatness: figures.flatness.unwrap_or(T::zero()),
@@ -149,13 +171,21 @@ pub(super) fn finish<T: Real, S: Sample>(
             // The rules every row is judged by (a pass skips the glitch
             // rules when they dropped no row: the rows are the same).
             glitch_rules: config.robust,
+            #[cfg(feature = "robust")]
             clip_levels: start
                 .weights
                 .gate
                 .rules
                 .clip
                 .map(|axis| axis.map(|level| Some(level).filter(|l| l.abs() < T::MAX))),
+            #[cfg(feature = "robust")]
             screen: start.weights.gate.screen.as_ref().map(to_sensor),
+            // Without outlier handling no screening: no clip levels are
+            // found and no ball is set.
+            #[cfg(not(feature = "robust"))]
+            clip_levels: [[None; 2]; 3],
+            #[cfg(not(feature = "robust"))]
+            screen: None,
             residual_limit: limit,
             runs: *runs,
         },
@@ -166,12 +196,16 @@ pub(super) fn finish<T: Real, S: Sample>(
             calibration,
             report,
         },
+        #[cfg(feature = "robust")]
         final_max: last.max_residual,
         // (Ablation, docs/robustness.md: `misfit-gate` and `heavy-tails`
         // leave these out of the plain fit's cleanness.)
+        #[cfg(feature = "robust")]
         misfit: !cfg!(mag_cal_ablate = "misfit-gate") && figures.misfit(&config.thresholds),
+        #[cfg(feature = "robust")]
         misshapen: config.method == Method::Ls
             && last.lack_of_shape > last.fit_error * T::lit(CLEAN_SHAPE),
+        #[cfg(feature = "robust")]
         heavy_tails: !cfg!(mag_cal_ablate = "heavy-tails")
             && last.radial_rms > last.fit_error * T::lit(CLEAN_TAIL)
             && last.radial_rms * last.radial_rms > T::EPSILON,

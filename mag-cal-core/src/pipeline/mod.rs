@@ -4,15 +4,19 @@
 
 mod finish;
 mod plain;
+#[cfg(feature = "robust")]
 mod robust;
 
 use crate::judge::quality::{self, Figures};
-use crate::robust::{refit, runs, screen};
+use crate::robust::runs;
+#[cfg(feature = "robust")]
+use crate::robust::{refit, screen};
 use crate::steps::{ellipsoid, final_pass, methods, moments, normalize, rules};
 use crate::{Calibration, Config, Error, Fit, Method, Quality, Real, Report, Sample, Selection};
 
 use finish::{finish, judge_failure, method_step};
 use plain::plain_path;
+#[cfg(feature = "robust")]
 use robust::robust_path;
 
 /// Calibrates from a slice of raw samples, in precision `T`.
@@ -69,13 +73,32 @@ fn pipeline<T: Real, S: Sample>(
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
     let scan = normalize::scan::<T, S>(samples, config.robust)?;
+    // Without outlier handling the plain path's answer is the answer.
+    #[cfg(not(feature = "robust"))]
+    return plain_path(samples, config, &scan, ls_solve, step);
+    #[cfg(feature = "robust")]
+    robust_pipeline(samples, config, &scan, ls_solve, step)
+}
+
+/// [`pipeline`] after the scan, with outlier handling compiled in: the
+/// plain path, then the robust path when [`Config::robust`] is set and
+/// the plain fit is not clean. Inlined (its one caller).
+#[cfg(feature = "robust")]
+#[inline(always)]
+fn robust_pipeline<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    scan: &normalize::Scan<T>,
+    ls_solve: ellipsoid::Solve<T>,
+    step: methods::Step<T, S>,
+) -> Result<Fit<T>, Error> {
     let gate = rules::Gate {
         rules: scan.rules,
         screen: None,
     };
     if config.robust && screen::clip_hint(samples, &gate, scan.used) {
         // A clip level may bend the plain fit unseen: screening finds it.
-        return robust_path(samples, config, &scan, ls_solve, step);
+        return robust_path(samples, config, scan, ls_solve, step);
     }
     // The plain answer is returned as it is, or not at all. It has this
     // function's own type, so that it goes straight into the caller's slot
@@ -83,16 +106,17 @@ fn pipeline<T: Real, S: Sample>(
     // of stack; an `Option` of the answer, or a route in its error, took
     // 480: the footprint's `measured_call`).
     let mut route = Route::Robust;
-    let plain = plain_path(samples, config, &scan, ls_solve, step, &mut route);
+    let plain = plain_path(samples, config, scan, ls_solve, step, &mut route);
     match route {
         Route::Plain => plain,
-        Route::Robust => robust_path(samples, config, &scan, ls_solve, step),
+        Route::Robust => robust_path(samples, config, scan, ls_solve, step),
     }
 }
 
 /// Whose answer the batch fit returns: the plain path's or the robust
 /// path's. Private to the pipeline: a caller sees a calibration or an
 /// [`Error`], never a route.
+#[cfg(feature = "robust")]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Route {
     /// The plain path's answer, a fit or a refusal: always without outlier

@@ -1,6 +1,7 @@
 //! The plain path: every row the scan kept, weight 1.
 
 use super::*;
+#[cfg(feature = "robust")]
 use crate::tuning::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SKEWNESS};
 
 /// What [`plain_path`] returns when the robust path answers
@@ -8,11 +9,13 @@ use crate::tuning::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SKEWNESS};
 /// return: no answer, a value of the answer's type only, which `pipeline`
 /// drops. (The answer's own type keeps the plain fit in the caller's slot;
 /// see `pipeline`.)
+#[cfg(feature = "robust")]
 const NOT_TAKEN: Error = Error::NoConvergence { iterations: 0 };
 
 /// The plain pipeline: every row the scan kept, weight 1. Its answer, the
-/// fit or a refusal, stands without outlier handling; with it, only when
-/// the fit is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL)):
+/// fit or a refusal, stands without outlier handling (without the `robust`
+/// feature, always); with it, only when
+/// the fit is clean (`CLEAN_LIMIT`, `CLEAN_TAIL`):
 /// `route` is then set to [`Route::Plain`], else left as the caller set it
 /// ([`Route::Robust`]). Out of line, as the robust path: inlined, both
 /// paths' locals would share `pipeline`'s frame.
@@ -23,43 +26,51 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     scan: &normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
-    route: &mut Route,
+    #[cfg(feature = "robust")] route: &mut Route,
 ) -> Result<Fit<T>, Error> {
+    #[cfg(feature = "robust")]
     if !config.robust {
         *route = Route::Plain;
     }
     let mut figures = Figures::new(scan, config, false);
     let start = plain_start(samples, config, scan, ls_solve, &mut figures)?;
     let est = method_step(samples, config, &start, step, &figures)?;
-    if est.beyond_tails_limit {
-        // The method's first pass found heavy tails, or rows pulled
-        // inwards (only with outlier handling, which sets the limit).
-        return Err(NOT_TAKEN);
+    // Without outlier handling compiled in, no route to decide: the fit
+    // is the answer.
+    #[cfg(not(feature = "robust"))]
+    return finish(samples, config, &start, &est, &mut figures).map(|done| done.fit);
+    #[cfg(feature = "robust")]
+    {
+        if est.beyond_tails_limit {
+            // The method's first pass found heavy tails, or rows pulled
+            // inwards (only with outlier handling, which sets the limit).
+            return Err(NOT_TAKEN);
+        }
+        let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+        let method_clean = est
+            .max_residual
+            .zip(est.sigma)
+            .is_none_or(|(m, s)| clean_limit(m, s));
+        if config.robust && !method_clean {
+            // Not clean, and this fit will not be returned: no final pass
+            // (about 120 instructions a row on a Cortex-M4F).
+            return Err(NOT_TAKEN);
+        }
+        let done = finish(samples, config, &start, &est, &mut figures)?;
+        let fit = done.fit;
+        let sigma = fit.report.quality.fit_error;
+        // Heavy tails: a contamination that broadened every residual, so that
+        // none stands out.
+        let is_clean = method_clean
+            && clean_limit(done.final_max, sigma)
+            && !done.heavy_tails
+            && !done.misfit
+            && !done.misshapen;
+        if is_clean {
+            *route = Route::Plain;
+        }
+        Ok(fit)
     }
-    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
-    let method_clean = est
-        .max_residual
-        .zip(est.sigma)
-        .is_none_or(|(m, s)| clean_limit(m, s));
-    if config.robust && !method_clean {
-        // Not clean, and this fit will not be returned: no final pass
-        // (about 120 instructions a row on a Cortex-M4F).
-        return Err(NOT_TAKEN);
-    }
-    let done = finish(samples, config, &start, &est, &mut figures)?;
-    let fit = done.fit;
-    let sigma = fit.report.quality.fit_error;
-    // Heavy tails: a contamination that broadened every residual, so that
-    // none stands out.
-    let is_clean = method_clean
-        && clean_limit(done.final_max, sigma)
-        && !done.heavy_tails
-        && !done.misfit
-        && !done.misshapen;
-    if is_clean {
-        *route = Route::Plain;
-    }
-    Ok(fit)
 }
 
 /// The plain path up to the method: the moments and the LS fit, and the
@@ -98,9 +109,24 @@ pub(super) fn plain_start<T: Real, S: Sample>(
             sigma: None,
             tails_limit: config
                 .robust
-                .then(|| (T::lit(CLEAN_KURTOSIS), T::lit(CLEAN_SKEWNESS))),
+                .then(|| (T::lit(TAILS_LIMIT.0), T::lit(TAILS_LIMIT.1))),
         },
         robust_passes: 0,
     };
     Ok(start)
 }
+
+/// The plain pass's tails limit with outlier handling
+/// ([`methods::Weights::tails_limit`]): [`CLEAN_KURTOSIS`] and
+/// [`CLEAN_SKEWNESS`], beyond which the robust path answers.
+#[cfg(feature = "robust")]
+const TAILS_LIMIT: (f64, f64) = (CLEAN_KURTOSIS, CLEAN_SKEWNESS);
+
+/// Without the `robust` feature there is no robust path to hand over to:
+/// no tails stop the plain pass (no kurtosis exceeds, no skewness is below
+/// minus, infinity; nor does a NaN). The limit is still set with
+/// [`Config::robust`], so that the LS fit alone makes the artificial-data
+/// pass at its fit as it does with the feature (its direction sums are
+/// the final pass's), and its figures are the same in both builds.
+#[cfg(not(feature = "robust"))]
+const TAILS_LIMIT: (f64, f64) = (f64::INFINITY, f64::INFINITY);

@@ -109,6 +109,7 @@ impl Runs {
     }
 
     /// Calls `visit(row, row before)` on every row of the spans.
+    #[cfg(feature = "robust")]
     pub(crate) fn visit<S>(&self, samples: &[S], mut visit: impl FnMut(&S, Option<&S>)) {
         for &(s, e) in self.spans() {
             let mut prev = s.checked_sub(1).and_then(|j| samples.get(j));
@@ -303,6 +304,7 @@ mod tests {
         assert_eq!(runs.spans(), &[span]);
     }
 
+    #[cfg(feature = "robust")]
     #[test]
     fn touching_runs_merge_and_spans_stop_at_the_ends() {
         let rejected = run(1)

@@ -43,6 +43,7 @@ use crate::numerics::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS}
 use crate::numerics::linalg::{larger, smaller};
 use crate::numerics::sphere::CentreFit;
 use crate::sample::Sample;
+use crate::steps::methods::MAD_TO_SIGMA;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Scan};
 use crate::steps::rules::{check, count_drops, every, pieces, Ball, Drops, Gate, Rules};
@@ -136,10 +137,6 @@ fn extremes<T: Real>(v: T, x: &mut (T, T, u32, u32)) {
         }
     }
 }
-
-/// `1 / Phi^-1(3/4)`: a standard deviation from the median absolute value
-/// of a normal variable.
-pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// What screening found.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -43,11 +43,15 @@ use crate::robust::runs::Runs;
 use crate::sample::Sample;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Projector};
-use crate::steps::rules::{check, pieces, Gate, Rules};
+#[cfg(any(feature = "robust", test, feature = "bench-internals"))]
+use crate::steps::rules::{check, Rules};
+use crate::steps::rules::{pieces, Gate};
 use crate::{Error, Real};
 
 /// The shape of the algebraic residuals `e = |u|^2 - 1` of a plain pass
 /// (raw moments: the LS start leaves their mean near 0).
+// (Without `robust` only the tests and the benchmarks measure them.)
+#[cfg(any(feature = "robust", test, feature = "bench-internals"))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Tails<T> {
     /// `n sum e^4 / (sum e^2)^2`: about 3 for Gaussian noise, more when a
@@ -125,6 +129,7 @@ impl<T: Real> Stats<T> {
 
     /// [`Stats::accumulate`], and the shape of the algebraic residuals
     /// `e_i = |u_i|^2 - 1` at the start ([`Tails`]).
+    #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
     pub(crate) fn accumulate_plain<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
@@ -149,10 +154,31 @@ impl<T: Real> Stats<T> {
         Ok((stats, tails))
     }
 
+    /// [`Stats::accumulate`] over the rows `gate` passes, weight 1, measuring
+    /// nothing: the one artificial-data pass of the plain build (no tails
+    /// limit, no residual limit). The rows and sums are those of the plain
+    /// pass ([`Stats::accumulate_plain`]) for a plain gate, and those of
+    /// the gated pass without a limit ([`Stats::accumulate_with`])
+    /// otherwise, to the bit.
+    #[cfg(not(feature = "robust"))]
+    pub(crate) fn accumulate_rows<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        gate: &Gate<T>,
+    ) -> Result<Self, Error> {
+        let mut total = [T::zero(); SUMS];
+        let map = Projector::new(norm, centre, w);
+        let count = row_sums(samples, &map, gate, &mut total);
+        Self::from_counted(count, &total, w)
+    }
+
     /// [`Stats::accumulate`] over the rows the pass's gate passes whose
     /// radial residual `r = |u| - 1` under the start is within the pass's
     /// limit (0/1 weights: a weighted ADC2 pass), measuring `|r|` of every
     /// row the gate passes into `residuals`.
+    #[cfg(any(feature = "robust", test))]
     pub(crate) fn accumulate_with<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
@@ -165,6 +191,7 @@ impl<T: Real> Stats<T> {
     }
 
     /// The pass: plain, or gated, weighted and measured.
+    #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
     fn from_pass<S: Sample>(
         samples: &[S],
         norm: &Normalization<T>,
@@ -175,13 +202,20 @@ impl<T: Real> Stats<T> {
         let mut total = [T::zero(); SUMS];
         let map = Projector::new(norm, centre, w);
         let count = sums(samples, &map, weighted, &mut total);
+        Self::from_counted(count, &total, w)
+    }
+
+    /// The statistics of a pass's `count` rows with a direction and their
+    /// sums `total`, under the start `w`.
+    #[inline(always)]
+    fn from_counted(count: usize, total: &[T; SUMS], w: &Matrix3<T>) -> Result<Self, Error> {
         if count < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
                 found: count,
                 required: crate::steps::normalize::MIN_SAMPLES,
             });
         }
-        Self::from_sums(count, &total, w)
+        Self::from_sums(count, total, w)
     }
 
     /// The statistics from the sums of the pass, or
@@ -329,6 +363,7 @@ impl<T: Real> Residuals<T> {
 enum Measure<'a, 'p, T: Real> {
     /// The plain pass (every finite row, weight 1): the sums of `e^2`,
     /// `e^3` and `e^4` of the algebraic residuals.
+    #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
     Tails(&'a mut [T; 3]),
     /// A gated pass: its gate and cut, and the residuals it measures.
     Gated(&'a Pass<'p, T>, &'a mut Residuals<T>),
@@ -351,6 +386,7 @@ fn sums<T: Real, S: Sample>(
     // nor the residuals: its loop is the cheaper one.
     // By reference: a copy took stack in the method's deepest frame.
     let runs: &Runs = match &weighted {
+        #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
         Measure::Tails(_) => &Runs::NONE,
         Measure::Gated(pass, _) => pass.runs,
     };
@@ -359,6 +395,7 @@ fn sums<T: Real, S: Sample>(
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);
             count += match &mut weighted {
+                #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
                 Measure::Tails(tails) => plain_directions(chunk, map, tails, &mut buf),
                 Measure::Gated(pass, res) => directions(chunk, prev, map, pass, res, &mut buf),
             };
@@ -366,6 +403,38 @@ fn sums<T: Real, S: Sample>(
         }
         // Four sums a step: one a step takes twice the instructions.
         const { assert!(SUMS.is_multiple_of(4)) };
+        let quads = total
+            .as_chunks_mut::<4>()
+            .0
+            .iter_mut()
+            .zip(a.as_chunks::<4>().0);
+        for (t, v) in quads {
+            *t = [t[0] + v[0], t[1] + v[1], t[2] + v[2], t[3] + v[3]];
+        }
+    }
+    count
+}
+
+/// [`sums`] of the plain build's pass ([`Stats::accumulate_rows`]): the
+/// same blocks and chunks, the rows of [`row_directions`]. A function of
+/// its own: `sums` links the directions of every kind of pass.
+#[cfg(not(feature = "robust"))]
+#[inline(never)]
+fn row_sums<T: Real, S: Sample>(
+    samples: &[S],
+    map: &Projector<T>,
+    gate: &Gate<T>,
+    total: &mut [T; SUMS],
+) -> usize {
+    let mut count = 0usize;
+    let mut buf = [[T::zero(); 4]; CHUNK];
+    for (_, block_prev, block) in Runs::NONE.pieces(samples, BLOCK) {
+        let mut a = [T::zero(); SUMS];
+        for (chunk_prev, chunk) in pieces(block, CHUNK) {
+            let prev = chunk_prev.or(block_prev);
+            count += row_directions(chunk, prev, map, gate, &mut buf);
+            add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
+        }
         let quads = total
             .as_chunks_mut::<4>()
             .0
@@ -398,6 +467,7 @@ const CHUNK: usize = 32;
 /// `[u, 1/|u|]` of each finite sample of `chunk` into `out` (zeros for a
 /// sample without a direction: non-finite, or at the fitted centre), and
 /// the count of the samples with a direction: the plain pass.
+#[cfg(any(feature = "robust", test, feature = "bench-internals"))]
 #[inline(never)]
 fn plain_directions<T: Real, S: Sample>(
     chunk: &[S],
@@ -427,8 +497,48 @@ fn plain_directions<T: Real, S: Sample>(
     count
 }
 
+/// `[u, 1/|u|]` of each sample of `chunk` the gate passes into `out` (zeros
+/// for the others and for a sample without a direction), and the count of
+/// the samples with a direction: the plain build's pass. With a plain gate
+/// the rows and directions of [`plain_directions`], otherwise those of
+/// [`directions`] without a limit (which leaves out a row whose `|u|`
+/// overflows, its residual not being finite), without measuring.
+#[cfg(not(feature = "robust"))]
+#[inline(never)]
+fn row_directions<T: Real, S: Sample>(
+    chunk: &[S],
+    prev: Option<&S>,
+    map: &Projector<T>,
+    gate: &Gate<T>,
+    out: &mut [[T; 4]; CHUNK],
+) -> usize {
+    let plain = gate.is_plain();
+    let mut count = 0;
+    let mut last = prev;
+    for (sample, slot) in chunk.iter().zip(out.iter_mut()) {
+        let row = gate.pass(sample, last);
+        last = Some(sample);
+        *slot = [T::zero(); 4];
+        let Some(y) = row else {
+            continue;
+        };
+        let [ux, uy, uz] = map.project(y);
+        let q = ux * ux + uy * uy + uz * uz;
+        if !(q >= T::MIN_POSITIVE) {
+            continue;
+        }
+        let inv = q.rsqrt();
+        if plain || (q * inv - T::one()).abs() <= T::MAX {
+            *slot = [ux, uy, uz, inv];
+            count += 1;
+        }
+    }
+    count
+}
+
 /// `[u, 1/|u|]` of one sample and `|u|^2`; `None` when the sample is not
 /// finite or lies at the fitted centre (no direction).
+#[cfg(any(feature = "robust", test, feature = "bench-internals"))]
 #[inline(always)]
 fn plain_direction<T: Real, S: Sample>(sample: &S, map: &Projector<T>) -> Option<([T; 4], T)> {
     let [ux, uy, uz] = map.project(check::<T, S>(sample, None, &Rules::PLAIN).ok()?);
@@ -606,6 +716,51 @@ mod tests {
         }
     }
 
+    /// The plain build's one pass gives the statistics of the plain pass
+    /// for a plain gate and of the gated pass without a limit otherwise,
+    /// to the bit: in `f32`, on clean rows and on rows with glitches (a
+    /// zero row, a repeat).
+    #[cfg(not(feature = "robust"))]
+    #[test]
+    fn the_plain_builds_pass_is_the_plain_and_the_gated_one() {
+        let mut rng = Rng(11);
+        let norm = Normalization {
+            centre: Vector3::new(120.0f32, -40.0, 300.0),
+            scale: 50.0,
+            inv_scale: 1.0 / 50.0,
+        };
+        let b0 = Vector3::new(0.05f32, -0.02, 0.1);
+        let w0 = Matrix3::new(1.1f32, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.2);
+        let t0: Matrix3<f32> = w0.try_inverse().unwrap();
+        let mut samples = [[0i16; 3]; 700];
+        for s in samples.iter_mut() {
+            let d = rng.direction() * rng.range(0.9, 1.1);
+            let x: Vector3<f32> = b0 + t0 * Vector3::new(d.x as f32, d.y as f32, d.z as f32);
+            let y = norm.point_back(&x);
+            *s = [y.x, y.y, y.z].map(|v| v.round() as i16);
+        }
+        let plain = Stats::accumulate(&samples, &norm, &b0, &w0).unwrap();
+        let rows = Stats::accumulate_rows(&samples, &norm, &b0, &w0, &Gate::PLAIN).unwrap();
+        assert_eq!(rows, plain);
+        samples[17] = [0; 3];
+        samples[400] = samples[399];
+        let gate = Gate {
+            rules: Rules::GLITCHES,
+            screen: None,
+        };
+        let pass = Pass {
+            gate: &gate,
+            runs: &Runs::NONE,
+            limit: None,
+        };
+        let mut res = Residuals::new();
+        let gated = Stats::accumulate_with(&samples, &norm, &b0, &w0, &pass, &mut res).unwrap();
+        let rows = Stats::accumulate_rows(&samples, &norm, &b0, &w0, &gate).unwrap();
+        assert_eq!(rows, gated);
+        // The zero row and the repeat dropped.
+        assert_eq!(gated.count, 698);
+    }
+
     /// The kurtosis of the plain pass is that of `|u|^2 - 1` computed row
     /// by row, about 3 for Gaussian radial noise and far above it when a
     /// tenth of the rows sits 0.3 off the ellipsoid.
@@ -658,11 +813,18 @@ mod tests {
         assert!(clean.skewness.abs() < 0.3, "{clean:?}");
         // Every tenth row 0.3 outside: heavy tails, and all on one side.
         let dirty = kurtosis(200, &mut samples);
-        assert!(
-            dirty.kurtosis > crate::tuning::CLEAN_KURTOSIS + 3.0,
-            "{dirty:?}"
-        );
-        assert!(dirty.skewness > crate::tuning::CLEAN_SKEWNESS, "{dirty:?}");
+        // Beyond the limits of the plain fit's cleanness (only with
+        // outlier handling).
+        #[cfg(feature = "robust")]
+        {
+            assert!(
+                dirty.kurtosis > crate::tuning::CLEAN_KURTOSIS + 3.0,
+                "{dirty:?}"
+            );
+            assert!(dirty.skewness > crate::tuning::CLEAN_SKEWNESS, "{dirty:?}");
+        }
+        #[cfg(not(feature = "robust"))]
+        assert!(dirty.kurtosis > 3.0 * clean.kurtosis, "{dirty:?}");
     }
 
     #[test]

@@ -32,14 +32,19 @@ pub(crate) struct FinalPass<T: Real> {
     /// Whether the cell means are off zero beyond the noise.
     pub misfit_significant: bool,
     /// The lack of fit about the mean radial residual (`lack_of_fit` with
-    /// `centred`), 0 when not significant.
+    /// `centred`), 0 when not significant. (Only the robust pipeline's
+    /// cleanness reads it.)
+    #[cfg(feature = "robust")]
     pub lack_of_shape: T,
     /// The mean radial residual `|u| - 1` of the rows used.
     pub mean_residual: T,
-    /// The largest `||u| - 1|` over the rows the gate passed.
+    /// The largest `||u| - 1|` over the rows the gate passed. (Only the
+    /// robust pipeline's cleanness reads it.)
+    #[cfg(feature = "robust")]
     pub max_residual: T,
     /// Skewness of `|u| - 1` over the rows used (reported only by the
     /// robust path, [`crate::judge::quality::Quality::skewness`]).
+    #[cfg(feature = "robust")]
     pub skewness: T,
 }
 
@@ -172,6 +177,7 @@ impl<T: Real> FinalSums<T> {
             acc: Accumulated {
                 passed: 0,
                 used: 0,
+                #[cfg(feature = "robust")]
                 max: T::zero(),
                 sums: [T::zero(); 10],
                 cubes: T::zero(),
@@ -223,6 +229,7 @@ impl<T: Real> FinalSums<T> {
         }
         let (coverage, gram_condition) = direction_figures(&dirs)?;
         let fit_error = crate::steps::methods::robust_sigma(&self.hist).unwrap_or(T::zero());
+        #[cfg(feature = "robust")]
         let lack_of_shape = match lack_of_fit(&self.cells, fit_error, true) {
             (lack, true) => lack,
             (_, false) => T::zero(),
@@ -239,9 +246,13 @@ impl<T: Real> FinalSums<T> {
         };
         // The moments about zero of the rows used, then about their mean
         // (the residuals are small: no cancellation to fear).
+        #[cfg(feature = "robust")]
         let n = T::from_count(acc.used);
+        #[cfg(feature = "robust")]
         let (m1, m2, m3) = (sum / n, t[0] / n, acc.cubes / n);
+        #[cfg(feature = "robust")]
         let var = m2 - m1 * m1;
+        #[cfg(feature = "robust")]
         let skewness = if var > T::zero() {
             (m3 - T::lit(3.0) * m1 * m2 + T::lit(2.0) * m1 * m1 * m1) / (var * var.square_root())
         } else {
@@ -256,9 +267,12 @@ impl<T: Real> FinalSums<T> {
             fit_error,
             lack_of_fit,
             misfit_significant,
+            #[cfg(feature = "robust")]
             lack_of_shape,
             mean_residual,
+            #[cfg(feature = "robust")]
             max_residual: acc.max,
+            #[cfg(feature = "robust")]
             skewness,
         })
     }
@@ -301,6 +315,8 @@ struct BlockSpec<'a, T: Real> {
 struct Accumulated<T: Real> {
     passed: usize,
     used: usize,
+    /// The largest residual (only the robust pipeline reads it).
+    #[cfg(feature = "robust")]
     max: T,
     sums: [T; 10],
     /// `sum (|u| - 1)^3` of the rows used.
@@ -329,6 +345,7 @@ fn final_block<T: Real, S: Sample>(
     let one = T::one();
     let mut a = [T::zero(); 10];
     let mut cubes = T::zero();
+    #[cfg(feature = "robust")]
     let mut max = acc.max;
     let (mut passed, mut used) = (0, 0);
     let plain = gate.is_plain();
@@ -350,7 +367,10 @@ fn final_block<T: Real, S: Sample>(
         if !(q >= T::MIN_POSITIVE) {
             // At the centre: |u| - 1 = -1, no direction.
             hist.add(one);
-            max = larger(max, one);
+            #[cfg(feature = "robust")]
+            {
+                max = larger(max, one);
+            }
             if one <= spec.limit {
                 used += 1;
                 a[0] += one;
@@ -363,7 +383,10 @@ fn final_block<T: Real, S: Sample>(
         let e = (q - one) / (q * inv + one);
         let r = e.abs();
         hist.add(r);
-        max = larger(max, r);
+        #[cfg(feature = "robust")]
+        {
+            max = larger(max, r);
+        }
         if !(r <= spec.limit) {
             continue;
         }
@@ -392,7 +415,10 @@ fn final_block<T: Real, S: Sample>(
         *t += v;
     }
     acc.cubes += cubes;
-    acc.max = max;
+    #[cfg(feature = "robust")]
+    {
+        acc.max = max;
+    }
     acc.passed += passed;
     acc.used += used;
 }

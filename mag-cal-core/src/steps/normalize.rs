@@ -110,7 +110,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         sum_sq: zero,
     };
     if let Some(o) = origin {
-        sums = if gate.is_plain() {
+        sums = if gate.plain_loop() {
             sums_about(rest, before_rest, o, &Finite)
         } else {
             sums_about(rest, before_rest, o, &gate)

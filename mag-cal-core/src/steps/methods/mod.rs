@@ -1,15 +1,17 @@
 //! Step 4 of Algorithm 1: the re-estimation methods, each a small objective
 //! over the shared [`crate::numerics::quasi_newton`] solver.
 
+#[cfg(feature = "robust")]
 use crate::tuning::OUTLIER_CUT;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::larger;
 use crate::robust::runs::Runs;
-use crate::robust::screen::MAD_TO_SIGMA;
 use crate::sample::Sample;
-use crate::steps::artificial::{Pass, Residuals, Stats};
+use crate::steps::artificial::Stats;
+#[cfg(feature = "robust")]
+use crate::steps::artificial::{Pass, Residuals};
 use crate::steps::ellipsoid::Ellipsoid;
 use crate::steps::final_pass::DirectionSums;
 use crate::steps::normalize::Normalization;
@@ -172,6 +174,7 @@ impl<T: Real> Weights<'static, T> {
 
 impl<T: Real> Weights<'_, T> {
     /// The residual limit, [`OUTLIER_CUT`] robust standard deviations.
+    #[cfg(feature = "robust")]
     pub(crate) fn limit(&self) -> Option<T> {
         self.sigma.map(|s| s * T::lit(OUTLIER_CUT))
     }
@@ -205,28 +208,44 @@ pub(crate) fn weighted_stats<T: Real, S: Sample>(
     w: &Matrix3<T>,
     weights: &Weights<T>,
 ) -> Result<Option<PassStats<T>>, Error> {
-    if weights.gate.is_plain() && weights.sigma.is_none() {
-        let (stats, tails) = Stats::accumulate_plain(samples, norm, centre, w)?;
-        // (Ablation, docs/robustness.md: `kurtosis-gate` and
-        // `skewness-gate` take either figure out.)
-        let outside = |(kurtosis, skewness): (T, T)| {
-            (!cfg!(mag_cal_ablate = "kurtosis-gate") && tails.kurtosis > kurtosis)
-                || (!cfg!(mag_cal_ablate = "skewness-gate") && tails.skewness < -skewness)
-        };
-        if weights.tails_limit.is_some_and(outside) {
-            // Heavy tails, or rows pulled inwards: this plain fit will not be
-            // taken.
-            return Ok(None);
-        }
-        return Ok(Some((stats, None, T::zero())));
+    // The plain build: one pass for every gate. No weights (only the
+    // robust path sets a sigma: `weights.sigma` is always `None`), no
+    // tails limit that stops the pass, and nothing a gated pass measures
+    // is read without weights.
+    #[cfg(not(feature = "robust"))]
+    {
+        Ok(Some((
+            Stats::accumulate_rows(samples, norm, centre, w, &weights.gate)?,
+            None,
+            T::zero(),
+        )))
     }
-    // A tail call: this frame is gone while the measured pass runs.
-    measured_stats(samples, norm, centre, w, weights)
+    #[cfg(feature = "robust")]
+    {
+        if weights.gate.is_plain() && weights.sigma.is_none() {
+            let (stats, tails) = Stats::accumulate_plain(samples, norm, centre, w)?;
+            // (Ablation, docs/robustness.md: `kurtosis-gate` and
+            // `skewness-gate` take either figure out.)
+            let outside = |(kurtosis, skewness): (T, T)| {
+                (!cfg!(mag_cal_ablate = "kurtosis-gate") && tails.kurtosis > kurtosis)
+                    || (!cfg!(mag_cal_ablate = "skewness-gate") && tails.skewness < -skewness)
+            };
+            if weights.tails_limit.is_some_and(outside) {
+                // Heavy tails, or rows pulled inwards: this plain fit will not be
+                // taken.
+                return Ok(None);
+            }
+            return Ok(Some((stats, None, T::zero())));
+        }
+        // A tail call: this frame is gone while the measured pass runs.
+        measured_stats(samples, norm, centre, w, weights)
+    }
 }
 
 /// [`weighted_stats`] of a gated or weighted pass (never `None`: only a
 /// plain pass has a tails limit). Out of line: the residuals' histogram
 /// takes stack only while it runs, not on the plain path.
+#[cfg(feature = "robust")]
 #[inline(never)]
 fn measured_stats<T: Real, S: Sample>(
     samples: &[S],
@@ -244,6 +263,10 @@ fn measured_stats<T: Real, S: Sample>(
     let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
     Ok(Some((stats, robust_sigma(&res.hist), res.max)))
 }
+
+/// `1 / Phi^-1(3/4)`: a standard deviation from the median absolute value
+/// of a normal variable.
+pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// The robust standard deviation `1.4826 median|r|` of the residuals
 /// counted in `hist`, floored at `1024 eps` (below it rounding, not noise,
