@@ -41,6 +41,7 @@ use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{columns_of, from_columns, inverse3, larger};
 use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::methods::robust_sigma;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Projector};
 use crate::steps::rules::{check, pieces, Gate, Rules};
@@ -149,21 +150,6 @@ impl<T: Real> Stats<T> {
         Ok((stats, tails))
     }
 
-    /// [`Stats::accumulate`] over the rows the pass's gate passes whose
-    /// radial residual `r = |u| - 1` under the start is within the pass's
-    /// limit (0/1 weights: a weighted ADC2 pass), measuring `|r|` of every
-    /// row the gate passes into `residuals`.
-    pub(crate) fn accumulate_with<S: Sample>(
-        samples: &[S],
-        norm: &Normalization<T>,
-        centre: &Vector3<T>,
-        w: &Matrix3<T>,
-        pass: &Pass<'_, T>,
-        residuals: &mut Residuals<T>,
-    ) -> Result<Self, Error> {
-        Self::from_pass(samples, norm, centre, w, Measure::Gated(pass, residuals))
-    }
-
     /// The pass: plain, or gated, weighted and measured.
     fn from_pass<S: Sample>(
         samples: &[S],
@@ -244,43 +230,78 @@ fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
 /// triangles of `h h^T`, `g h^T = e h h^T` and `g g^T = e^2 h h^T` (6 each).
 const SUMS: usize = 24;
 
-/// The sums of a gated artificial-data pass taken over several pieces of
-/// the samples in turn (a pass in slices; [`crate::device::background`]).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PassSums<T: Real> {
+/// One gated artificial-data pass under one start, as a value that is fed
+/// the rows in slices ([`AdcPass::feed`], the background calibrator,
+/// [`crate::device::background`]) or run over all of them at once
+/// ([`AdcPass::run`], the batch fit): the same sums either way, then the
+/// same statistics and robust sigma.
+#[derive(Clone)]
+pub(crate) struct AdcPass<T: Real> {
+    /// The start `(b0, W0)`, folded with the normalisation.
+    map: Projector<T>,
+    /// Rows with `||u| - 1|` above this are left out (none when `None`).
+    limit: Option<T>,
+    /// Rows with a direction so far.
     count: usize,
     total: [T; SUMS],
+    /// The residuals of every row the gate passed.
+    residuals: Residuals<T>,
 }
 
-impl<T: Real> PassSums<T> {
-    /// No rows yet.
-    pub(crate) fn new() -> Self {
+impl<T: Real> AdcPass<T> {
+    /// The whole pass over `samples` under the start `(centre, w)` in the
+    /// coordinates of `norm`, with the gate, spans and limit of `pass`: the
+    /// statistics, and the residuals of the rows the gate passed measured
+    /// into `residuals`. No value is kept: the sums stay in the frame of
+    /// the pass, as those of the plain pass.
+    ///
+    /// [`Error::NotAnEllipsoid`] when `W0` is singular to working precision,
+    /// [`Error::TooFewSamples`] when fewer than [`crate::MIN_SAMPLES`]
+    /// rows have a direction within the limit.
+    pub(crate) fn run<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        pass: &Pass<'_, T>,
+        residuals: &mut Residuals<T>,
+    ) -> Result<Stats<T>, Error> {
+        Stats::from_pass(samples, norm, centre, w, Measure::Gated(pass, residuals))
+    }
+
+    /// No rows yet: the pass under the start `(centre, w)` in the
+    /// coordinates of `norm`, leaving out rows beyond `limit`.
+    pub(crate) fn new(
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        limit: Option<T>,
+    ) -> Self {
         Self {
+            map: Projector::new(norm, centre, w),
+            limit,
             count: 0,
             total: [T::zero(); SUMS],
+            residuals: Residuals::new(),
         }
     }
 
-    /// Adds the rows of `samples` as [`Stats::accumulate_with`] takes them.
-    pub(crate) fn add<S: Sample>(
-        &mut self,
-        samples: &[S],
-        map: &Projector<T>,
-        pass: &Pass<'_, T>,
-        residuals: &mut Residuals<T>,
-    ) {
-        self.count += sums(
-            samples,
-            map,
-            Measure::Gated(pass, residuals),
-            &mut self.total,
-        );
+    /// Adds the rows of `rows` the gate passes outside the spans of `runs`
+    /// (a slice of the samples; the rows after it come with the next call).
+    pub(crate) fn feed<S: Sample>(&mut self, rows: &[S], gate: &Gate<T>, runs: &Runs) {
+        let pass = Pass {
+            gate,
+            runs,
+            limit: self.limit,
+        };
+        let measure = Measure::Gated(&pass, &mut self.residuals);
+        self.count += sums(rows, &self.map, measure, &mut self.total);
     }
 
-    /// The statistics of every row added, under the start `w`.
+    /// The statistics of every row fed, under the start `w` (the pass's).
     ///
     /// # Errors
-    /// As [`Stats::accumulate_with`].
+    /// As [`AdcPass::run`].
     pub(crate) fn stats(&self, w: &Matrix3<T>) -> Result<Stats<T>, Error> {
         if self.count < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
@@ -289,6 +310,12 @@ impl<T: Real> PassSums<T> {
             });
         }
         Stats::from_sums(self.count, &self.total, w).ok_or(Error::NotAnEllipsoid)
+    }
+
+    /// The robust standard deviation of the residuals of the rows the gate
+    /// passed (see [`robust_sigma`]); `None` before any.
+    pub(crate) fn sigma(&self) -> Option<T> {
+        robust_sigma(&self.residuals.hist)
     }
 }
 

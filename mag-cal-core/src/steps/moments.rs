@@ -316,6 +316,44 @@ pub(crate) struct Cut<T: Real> {
     pub limit: T,
 }
 
+/// A moments pass as a value, fed the rows in slices
+/// ([`MomentsPass::feed`], the background calibrator,
+/// [`crate::device::background`]); the batch fit runs the same pass over
+/// all of them at once ([`Moments::accumulate_with`]). The moments of the
+/// slices add up (power sums), in blocks of [`BLOCK`] rows from each
+/// slice's start.
+#[derive(Clone, Copy)]
+pub(crate) struct MomentsPass<T: Real> {
+    norm: Normalization<T>,
+    cut: Option<Cut<T>>,
+    moments: Moments<T>,
+}
+
+impl<T: Real> MomentsPass<T> {
+    /// No rows yet: the moments of the rows normalised by `norm` (within
+    /// `cut`, when given).
+    pub(crate) fn new(norm: Normalization<T>, cut: Option<Cut<T>>) -> Self {
+        Self {
+            norm,
+            cut,
+            moments: Moments::zero(),
+        }
+    }
+
+    /// Adds the rows of `rows` the gate passes (a slice of the samples; the
+    /// rows after it come with the next call).
+    pub(crate) fn feed<S: Sample>(&mut self, rows: &[S], gate: &Gate<T>) {
+        let cut = self.cut.as_ref();
+        let slice = Moments::accumulate_with(rows, &self.norm, gate, cut, None);
+        self.moments.add(&slice);
+    }
+
+    /// The moments of every row fed.
+    pub(crate) fn moments(&self) -> &Moments<T> {
+        &self.moments
+    }
+}
+
 // The two block sums are separate functions, not inlined into `accumulate`,
 // so that each loop gets the floating-point registers to itself: inlined,
 // the normalisation constants of one loop spill during the other.

@@ -8,7 +8,7 @@ use crate::numerics::linalg::larger;
 use crate::robust::runs::Runs;
 use crate::robust::screen::MAD_TO_SIGMA;
 use crate::sample::Sample;
-use crate::steps::artificial::{Pass, Residuals, Stats};
+use crate::steps::artificial::{AdcPass, Pass, Residuals, Stats};
 use crate::steps::ellipsoid::Ellipsoid;
 use crate::steps::final_pass::DirectionSums;
 use crate::steps::normalize::Normalization;
@@ -246,7 +246,7 @@ fn measured_stats<T: Real, S: Sample>(
         runs: weights.runs,
         limit: weights.limit(),
     };
-    let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
+    let stats = AdcPass::run(samples, norm, centre, w, &pass, &mut res)?;
     Ok(Some((stats, robust_sigma(&res.hist), res.max)))
 }
 
