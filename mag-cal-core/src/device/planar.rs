@@ -59,6 +59,7 @@ use core::fmt;
 
 use crate::device::heading::{atan2_deg, wrap_deg};
 use crate::error::{Shown, Versus};
+use crate::judge::planar;
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
 use crate::robust::screen::{screen, Unscreened};
@@ -154,17 +155,7 @@ impl core::error::Error for Error {
     }
 }
 
-/// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
-/// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
-/// real recording `planar_243.txt` 0.010; a +-30 deg band gives 0.18 and
-/// the full sphere 0.3-1. Between [`crate::judge::quality::REFUSE_FLATNESS`] and
-/// this, both the planar and the three-dimensional fit may run.
-pub const REFUSE_NOT_PLANAR: f64 = 0.06;
-
-/// Sectors of 30 deg of turn angle that must hold samples: fewer is
-/// [`Error::ShortArc`]. An ellipse from less than about 240 deg of arc is
-/// poorly determined (its centre slides along the missing side).
-pub const MIN_SECTORS: u8 = 8;
+pub use crate::judge::planar::{judge, PlanarThresholds, MIN_SECTORS, REFUSE_NOT_PLANAR};
 
 /// The sectors of turn angle counted by [`MIN_SECTORS`].
 pub const SECTORS: u8 = 12;
@@ -172,38 +163,6 @@ pub const SECTORS: u8 = 12;
 /// Artificial-data passes with the residual cut on data with outliers
 /// (step 4).
 const ROBUST_ROUNDS: u32 = 2;
-
-/// The limits [`judge`] applies.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub struct PlanarThresholds {
-    /// Flatness above this: [`Error::NotPlanar`].
-    pub refuse_not_planar: f32,
-    /// Fit error above this: [`Error::NoEllipse`].
-    pub refuse_fit_error: f32,
-    /// Fewer sectors than this: [`Error::ShortArc`].
-    pub min_sectors: u8,
-    /// Share of the rules' rows screened out or rejected above this:
-    /// [`crate::Error::TooManyOutliers`].
-    pub refuse_outlier_share: f32,
-}
-
-impl PlanarThresholds {
-    /// The measured constants of this module and of [`crate::judge::quality`].
-    pub const DEFAULT: Self = Self {
-        refuse_not_planar: REFUSE_NOT_PLANAR as f32,
-        refuse_fit_error: crate::judge::quality::REFUSE_FIT_ERROR as f32,
-        min_sectors: MIN_SECTORS,
-        refuse_outlier_share: crate::judge::quality::REFUSE_OUTLIER_SHARE as f32,
-    };
-}
-
-impl Default for PlanarThresholds {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
-}
 
 /// What to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -417,12 +376,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let screening = match screen(samples, &scanned) {
         Ok(s) => s,
         Err(Unscreened::AllEqual) => return Err(FitError::AllSamplesEqual.into()),
-        Err(Unscreened::Crowded) => {
-            return Err(Error::Fit(FitError::NoSphere {
-                fit_error: Figure::new(f32::INFINITY),
-                limit: Figure::new(config.thresholds.refuse_fit_error),
-            }))
-        }
+        Err(Unscreened::Crowded) => return Err(planar::crowded(&config.thresholds)),
     };
     let gate = Gate {
         rules: screening.rules,
@@ -572,7 +526,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
         axis_tilt_deg,
         passes,
     };
-    judge(&report, valid, &config.thresholds)?;
+    planar::judge(&report, valid, &config.thresholds)?;
 
     // Back to sensor units: u = W2 P (y - centre) / m.
     let mut centre = c;
@@ -588,53 +542,6 @@ pub fn calibrate_planar<T: Real, S: Sample>(
         calibration,
         report,
     })
-}
-
-/// Turns the figures into acceptance or a refusal: `valid` is the rows the
-/// rules kept.
-///
-/// # Errors
-/// In that order: too few samples ([`crate::Error::TooFewSamples`]),
-/// [`Error::NotPlanar`], [`Error::NoEllipse`], too many outliers
-/// ([`crate::Error::TooManyOutliers`]), [`Error::ShortArc`].
-pub fn judge<T: Real>(
-    report: &PlanarReport<T>,
-    valid: usize,
-    th: &PlanarThresholds,
-) -> Result<(), Error> {
-    if report.samples_used < MIN_SAMPLES {
-        return Err(Error::Fit(FitError::TooFewSamples {
-            found: report.samples_used,
-            required: MIN_SAMPLES,
-        }));
-    }
-    if !(report.flatness.to_single() <= th.refuse_not_planar) {
-        return Err(Error::NotPlanar {
-            flatness: Figure::new(report.flatness.to_single()),
-            limit: Figure::new(th.refuse_not_planar),
-        });
-    }
-    if !(report.fit_error.to_single() <= th.refuse_fit_error) {
-        return Err(Error::NoEllipse {
-            fit_error: Figure::new(report.fit_error.to_single()),
-            limit: Figure::new(th.refuse_fit_error),
-        });
-    }
-    let out = report.screened + report.rejected;
-    if valid > 0 && out as f32 > th.refuse_outlier_share * valid as f32 {
-        return Err(Error::Fit(FitError::TooManyOutliers {
-            rejected: out,
-            valid,
-            limit: Figure::new(th.refuse_outlier_share),
-        }));
-    }
-    if report.sectors < th.min_sectors {
-        return Err(Error::ShortArc {
-            sectors: report.sectors,
-            required: th.min_sectors,
-        });
-    }
-    Ok(())
 }
 
 /// Passes of the rules' scan (the drop count and the moments).
@@ -727,10 +634,7 @@ fn conic_fit<T: Real, S: Sample>(
     let phi = cholesky(&a5)
         .map(|l| cholesky_solve(&l, &r5))
         .ok_or(FitError::SingularSystem)?;
-    ellipse(&phi).ok_or(Error::NoEllipse {
-        fit_error: Figure::new(f32::INFINITY),
-        limit: Figure::new(config.thresholds.refuse_fit_error),
-    })
+    ellipse(&phi).ok_or_else(|| planar::not_an_ellipse(&config.thresholds))
 }
 
 /// What an artificial-data pass found.

@@ -2,7 +2,8 @@
 //! turn them into a result or a refusal: [`quality::judge`] for every
 //! three-dimensional fit (the batch fit's and the background calibrator's
 //! refits), with the background calibrator's own decisions in
-//! [`background`].
+//! [`background`], and [`planar::judge`] for the planar fit.
 
 pub(crate) mod background;
+pub(crate) mod planar;
 pub mod quality;
