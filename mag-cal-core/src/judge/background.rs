@@ -81,7 +81,7 @@ pub(crate) fn judge_refit<T: Real>(
     figures.record_final(last, last.fit_error);
     figures.distortion = Some(distortion);
     let warnings = quality::judge(&figures, th)?;
-    Ok((warnings, figures.quality(distortion)))
+    Ok((warnings, figures.quality(distortion, last, last.fit_error)))
 }
 
 /// Whether a refit that passed every check, of robust fit error

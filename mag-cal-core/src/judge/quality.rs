@@ -320,6 +320,7 @@ impl<T: Real> Figures<T> {
     /// Records the figures of the final pass `last`, with the fit error
     /// `fit_error` (the pass's, or the batch fit's LS alone taken about
     /// the mean radius).
+    #[inline(always)]
     pub(crate) fn record_final(&mut self, last: &FinalPass<T>, fit_error: T) {
         self.used = Some(last.used);
         self.coverage = Some(last.coverage);
@@ -331,16 +332,18 @@ impl<T: Real> Figures<T> {
     }
 
     /// The quality figures of a fit these figures passed [`judge`] for,
-    /// with its `distortion` (a figure not computed reads 0).
-    pub(crate) fn quality(&self, distortion: T) -> Quality<T> {
+    /// with its `distortion` and the figures of its final pass `last`
+    /// recorded with `fit_error` ([`Figures::record_final`]).
+    #[inline(always)]
+    pub(crate) fn quality(&self, distortion: T, last: &FinalPass<T>, fit_error: T) -> Quality<T> {
         Quality {
             flatness: self.flatness.unwrap_or(T::zero()),
             quadric_gap: self.quadric_gap.unwrap_or(T::zero()),
             distortion,
-            coverage: self.coverage.unwrap_or(T::zero()),
-            gram_condition: self.gram_condition.unwrap_or(T::zero()),
-            fit_error: self.fit_error.unwrap_or(T::zero()),
-            lack_of_fit: self.lack_of_fit.unwrap_or(T::zero()),
+            coverage: last.coverage,
+            gram_condition: last.gram_condition,
+            fit_error,
+            lack_of_fit: last.lack_of_fit,
             outlier_share: self.outlier_share().unwrap_or(T::zero()),
             skewness: self.skewness,
         }

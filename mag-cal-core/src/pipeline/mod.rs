@@ -9,7 +9,7 @@ mod robust;
 use crate::judge::quality::{self, Figures};
 use crate::robust::{refit, runs, screen};
 use crate::steps::{ellipsoid, final_pass, methods, moments, normalize, rules};
-use crate::{Calibration, Config, Error, Fit, Method, Quality, Real, Report, Sample, Selection};
+use crate::{Calibration, Config, Error, Fit, Method, Real, Report, Sample, Selection};
 
 use finish::{finish, judge_failure, method_step};
 use plain::plain_path;
