@@ -686,6 +686,62 @@ mod tests {
         assert!(dirty.skewness > crate::CLEAN_SKEWNESS, "{dirty:?}");
     }
 
+    /// The pass fed in slices is the pass run whole: bit for bit when the
+    /// slices are whole blocks (each block's sums are added to the total
+    /// in the same order), to rounding otherwise; the same rows cut, the
+    /// same residuals.
+    #[test]
+    fn the_pass_in_slices_is_the_pass_run_whole() {
+        let mut rng = Rng(3);
+        let norm = Normalization {
+            centre: Vector3::new(20.0, -10.0, 5.0),
+            scale: 30.0,
+            inv_scale: 1.0 / 30.0,
+        };
+        let b0 = Vector3::new(0.01, 0.02, -0.01);
+        let w0 = Matrix3::new(1.02, 0.01, 0.0, 0.01, 0.98, 0.02, 0.0, 0.02, 1.0);
+        let t0 = w0.try_inverse().unwrap();
+        let mut samples = [[0.0f64; 3]; 1000];
+        for (i, s) in samples.iter_mut().enumerate() {
+            // Every 25th row 0.2 off the ellipsoid: beyond the cut.
+            let off = if i % 25 == 0 { 0.2 } else { 0.0 };
+            let x = b0 + t0 * (rng.direction() * rng.range(0.99 + off, 1.01 + off));
+            let y = norm.point_back(&x);
+            *s = [y.x, y.y, y.z];
+        }
+        let (gate, limit) = (Gate::PLAIN, Some(0.05));
+        let pass = Pass {
+            gate: &gate,
+            runs: &Runs::NONE,
+            limit,
+        };
+        let mut res = Residuals::new();
+        let whole = AdcPass::run(&samples, &norm, &b0, &w0, &pass, &mut res).unwrap();
+        assert_eq!(whole.count, 1000 - 40);
+        let whole_sigma = robust_sigma::<f64>(&res.hist);
+        for slice in [128, 256, 37, 1] {
+            let mut fed = AdcPass::new(&norm, &b0, &w0, limit);
+            for rows in samples.chunks(slice) {
+                fed.feed(rows, &gate, &Runs::NONE);
+            }
+            let got = fed.stats(&w0).unwrap();
+            assert_eq!(got.count, whole.count);
+            assert_eq!(fed.sigma(), whole_sigma);
+            if slice % BLOCK == 0 {
+                assert_eq!(got, whole, "slices of {slice}");
+            } else {
+                let close = |a: &[f64], b: &[f64]| {
+                    a.iter()
+                        .zip(b)
+                        .all(|(x, y)| (x - y).abs() <= 1e-9 * (1.0 + y.abs()))
+                };
+                assert!(close(got.s_hh.as_slice(), whole.s_hh.as_slice()), "{slice}");
+                assert!(close(got.s_rr.as_slice(), whole.s_rr.as_slice()), "{slice}");
+                assert!(close(got.s_rh.as_slice(), whole.s_rh.as_slice()), "{slice}");
+            }
+        }
+    }
+
     #[test]
     fn a_singular_start_is_refused() {
         let norm = Normalization {
