@@ -563,6 +563,12 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
             return Stepped::Idle;
         }
+        if matches!(self.stage, Stage::Refit(_)) {
+            // In place: a refit's state is the largest stage (about 1 KB),
+            // and moving it in and out took a tenth of a refit's
+            // instructions on a Cortex-M4F.
+            return self.refit();
+        }
         let stage = core::mem::replace(&mut self.stage, Stage::Idle);
         let (next, result) = self.advance(stage);
         self.stage = next;
@@ -812,7 +818,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                     Err(e) => self.refused(e),
                 }
             }
-            Stage::Refit(refit) => self.refit(refit),
+            // Stepped in place (`Background::refit`).
+            stage @ Stage::Refit(_) => (stage, Stepped::Working),
             Stage::Age { mut pos } => {
                 let now = self.counters.readings as u32;
                 let max_age = self.config.max_age;
@@ -854,10 +861,15 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         }
     }
 
-    /// One slice of the refit's pass (or its one solve); at the end of a
-    /// pass, what it gives and the next pass, or the refit's end.
-    fn refit(&mut self, mut refit: Refit<T>) -> (Stage<T>, Stepped) {
-        let (rows, end) = self.slice(refit.pos);
+    /// One slice of the refit's pass (or its one solve), in place; at the
+    /// end of a pass, what it gives and the next pass, or the refit's end.
+    fn refit(&mut self) -> Stepped {
+        let Stage::Refit(refit) = &mut self.stage else {
+            return Stepped::Idle;
+        };
+        let len = self.store.len();
+        let end = refit.pos.saturating_add(self.config.slice.max(1)).min(len);
+        let rows = self.store.get(refit.pos..end).unwrap_or(&[]);
         let (plain, norm) = (Gate::PLAIN, &refit.prior.norm);
         match &mut refit.pass {
             RefitPass::Moments(pass) => pass.feed(rows, &plain),
@@ -871,19 +883,21 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
         }
         let sliced = !matches!(refit.pass, RefitPass::Solve(_));
-        if sliced && end < self.store.len() {
+        if sliced && end < len {
             refit.pos = end;
-            return (Stage::Refit(refit), Stepped::Working);
+            return Stepped::Working;
         }
-        let next = match refit.pass {
+        refit.pos = 0;
+        let th = &self.config.thresholds;
+        let next = match &refit.pass {
             RefitPass::Moments(pass) => Ok(RefitPass::Solve(*pass.moments())),
-            RefitPass::Solve(moments) => self.ls_start(&refit.prior, refit.current_error, &moments),
+            RefitPass::Solve(moments) => ls_start(norm, refit.current_error, moments, len, th),
             RefitPass::Adc {
                 ls,
                 round,
                 start,
                 pass,
-            } => adc_end(norm, ls, round, &start, &pass),
+            } => adc_end(norm, *ls, *round, start, pass),
             RefitPass::Final {
                 ls,
                 est,
@@ -891,10 +905,8 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                 sums,
                 ..
             } => {
-                let result = sums.finish(Some(directions)).and_then(|last| {
-                    let (valid, th) = (self.store.len(), &self.config.thresholds);
-                    let (warnings, quality) =
-                        background::judge_refit(&ls, valid, &est.w, &last, th)?;
+                let result = sums.finish(Some(*directions)).and_then(|last| {
+                    let (warnings, quality) = background::judge_refit(ls, len, &est.w, &last, th)?;
                     let calibration = Calibration::from_normalised_w(norm, &est.w, &est.centre)?;
                     Ok(Current {
                         calibration,
@@ -904,57 +916,27 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                         radial_rms: last.radial_rms,
                     })
                 });
+                let current_error = refit.current_error;
                 self.counters.refits += 1;
-                return match result {
-                    Ok(current) => self.conclude(current, refit.current_error),
+                let (stage, stepped) = match result {
+                    Ok(current) => self.conclude(current, current_error),
                     Err(e) => self.refused(e),
                 };
+                self.stage = stage;
+                return stepped;
             }
         };
         match next {
             Ok(pass) => {
-                refit.pos = 0;
                 refit.pass = pass;
-                (Stage::Refit(refit), Stepped::Working)
+                Stepped::Working
             }
-            Err(e) => self.refused(e),
+            Err(e) => {
+                let (stage, stepped) = self.refused(e);
+                self.stage = stage;
+                stepped
+            }
         }
-    }
-
-    /// The LS step on the moments of the rows within the prior's cut:
-    /// the first artificial-data pass from the LS fit, with the same cut;
-    /// a failed LS fit is judged on the flatness (planar data fail it).
-    fn ls_start(
-        &self,
-        prior: &Prior<T>,
-        current_error: T,
-        moments: &Moments<T>,
-    ) -> Result<RefitPass<T>, Error> {
-        let flatness = quality::flatness(moments, moments.count())?;
-        let (ls, quadric_gap) = crate::pipeline::ls_step(moments, ellipsoid::ls9);
-        let figures = LsFigures {
-            flatness,
-            quadric_gap: None,
-        };
-        let th = &self.config.thresholds;
-        let ls: Ellipsoid<T> = ls.map_err(|e| {
-            // Planar data fail the LS fit: say so.
-            quality::judge_failure(&figures.figures(self.store.len()), th, e)
-        })?;
-        let limit = cut(current_error);
-        Ok(RefitPass::Adc {
-            ls: LsFigures {
-                flatness,
-                quadric_gap,
-            },
-            round: 0,
-            pass: AdcPass::new(&prior.norm, &ls.centre, &ls.w, Some(limit)),
-            start: Estimate {
-                centre: ls.centre,
-                w: ls.w,
-                t: ls.t,
-            },
-        })
     }
 
     /// The end of a refit that passed every check: `current` is adopted
@@ -1042,6 +1024,43 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
         }
     }
+}
+
+/// The LS step of a refit of `valid` buffered rows on the moments of the
+/// rows within the prior's cut: the first artificial-data pass from the LS
+/// fit, with the same cut (from `current_error`, the prior's fit error); a
+/// failed LS fit is judged on the flatness with the thresholds `th`
+/// (planar data fail it).
+fn ls_start<T: Real>(
+    norm: &Normalization<T>,
+    current_error: T,
+    moments: &Moments<T>,
+    valid: usize,
+    th: &Thresholds,
+) -> Result<RefitPass<T>, Error> {
+    let flatness = quality::flatness(moments, moments.count())?;
+    let (ls, quadric_gap) = crate::pipeline::ls_step(moments, ellipsoid::ls9);
+    let figures = LsFigures {
+        flatness,
+        quadric_gap: None,
+    };
+    // Planar data fail the LS fit: say so.
+    let ls: Ellipsoid<T> =
+        ls.map_err(|e| quality::judge_failure(&figures.figures(valid), th, e))?;
+    let limit = cut(current_error);
+    Ok(RefitPass::Adc {
+        ls: LsFigures {
+            flatness,
+            quadric_gap,
+        },
+        round: 0,
+        pass: AdcPass::new(norm, &ls.centre, &ls.w, Some(limit)),
+        start: Estimate {
+            centre: ls.centre,
+            w: ls.w,
+            t: ls.t,
+        },
+    })
 }
 
 /// The end of a refit's artificial-data pass from `start`: the ADC2
