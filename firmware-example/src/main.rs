@@ -122,7 +122,7 @@ const COLLECT_ATTEMPTS: u32 = 3;
 /// fit) or 5 (clean plain fit) times its fit error, so what the check
 /// still refuses is a fit whose fit error is above 0.04-0.06, five to
 /// seven times the simulator's noise, which the core itself only refuses
-/// above 0.2 ([`mag_cal_core::quality::REFUSE_FIT_ERROR`]): a collection
+/// above 0.2 ([`mag_cal_core::Thresholds::refuse_fit_error`]): a collection
 /// too disturbed for this firmware's quiet sensor, as before. (The
 /// largest residual over all collected samples is logged alongside.)
 const MAX_RESIDUAL: f32 = 0.2;

@@ -77,7 +77,9 @@ fn adc1_rejects_an_invalid_noise_covariance() {
         };
         assert_eq!(
             calibrate::<f64, _>(&y, &cfg).unwrap_err(),
-            mag_cal_core::Error::InvalidNoiseCovariance
+            mag_cal_core::Error::InvalidConfig {
+                field: "noise_covariance"
+            }
         );
     }
 }

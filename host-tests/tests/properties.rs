@@ -3,8 +3,7 @@
 //! each variant; ADC1, ADC2, iterated ADC2 and subMLE from LS9).
 
 use host_tests::sim::{make_samples_axes, sphere, Rng};
-use mag_cal_core::quality::{REFUSE_DISTORTION, REFUSE_FLATNESS};
-use mag_cal_core::{calibrate, Calibration, Config, Error, Fit, LsVariant, Method};
+use mag_cal_core::{calibrate, Calibration, Config, Error, Fit, LsVariant, Method, Thresholds};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use proptest::prelude::*;
 
@@ -106,14 +105,14 @@ fn pair(
         (Ok(a), Ok(c)) => Ok(Some((a.calibration, c.calibration))),
         (Err(a), Err(c)) if core::mem::discriminant(&a) == core::mem::discriminant(&c) => {
             // `distortion()` draws axis ratios up to 4, a condition of `M`
-            // up to 16: the refusal limit (`REFUSE_DISTORTION`). With noise
+            // up to 16: the refusal limit (`Thresholds::refuse_distortion`). With noise
             // an estimate of a true condition near it may pass it, and then
             // it does in both frames: the same answer, which is what these
             // tests ask. (`noise_free_recovery` asserts that no draw is
             // refused but by the planar rule on samples that are that flat.)
             let sv = t.singular_values();
             let condition = (sv.max() / sv.min()).powi(2);
-            let near_limit = condition > 0.75 * REFUSE_DISTORTION;
+            let near_limit = condition > 0.75 * f64::from(Thresholds::DEFAULT.refuse_distortion);
             prop_assert!(
                 label.contains("LiGriffiths")
                     || (matches!(a, Error::ExtremeDistortion { .. }) && near_limit),
@@ -163,7 +162,7 @@ proptest! {
                 // the planar rule allows (measured here on the samples,
                 // with nalgebra's eigen decomposition): the refusal is then
                 // the rule's.
-                Err(Error::Planar { .. }) if sample_flatness(&y) < REFUSE_FLATNESS => continue,
+                Err(Error::Planar { .. }) if sample_flatness(&y) < f64::from(Thresholds::DEFAULT.refuse_flatness) => continue,
                 f => f.unwrap(),
             };
             let eb = (fit.calibration.hard_iron_vector() - b).norm() / rho;

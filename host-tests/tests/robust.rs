@@ -127,7 +127,7 @@ fn contamination_up_to_ten_percent() {
                     // Every kind to the ratio of the target, a clipped
                     // range too: its rows share the axis's extreme, which
                     // sends the data past the plain fit to the screening's
-                    // clip rule (`screen::CLIP_HINT_ROWS`; at 2 % the
+                    // clip rule (`tuning::CLIP_HINT_ROWS`; at 2 % the
                     // plain fit passed as clean, with ratios 1.35 / 1.52).
                     let (needed, ratio) = match kind {
                         // 64 runs a cell here, where one run is 1.6 %: the
@@ -184,7 +184,7 @@ fn assert_cell(what: &str, cell: &CellStats, accepted: f64, wrong: f64, ratio: (
 /// distorted ellipsoid) and settle on the ellipsoid it bulged: 89.5 % of
 /// the one-step runs were accepted, the rest refused as a systematic
 /// misfit with `M` off by 0.07-0.28. The trimmed refits on the subsample
-/// (`robust::TRIM_SHARE`) escape it.
+/// (`tuning::TRIM_SHARE`) escape it.
 #[test]
 fn a_displaced_patch_of_the_trajectory_is_left_out() {
     meets_the_targets_up_to_ten_percent(Kind::Patch);
@@ -268,15 +268,16 @@ fn the_rows_beside_a_run_are_counted_and_classified_as_rejected() {
 
 /// One axis clipped on some reads (a lower clip level with rows left
 /// beyond it, so the level is no extreme of the axis) in 20 and 30 % of
-/// the rows: at most 2 % of the runs silently wrong (the issue's target
-/// at 20-30 %), and the clipped rows dropped by the clip rule. The plain
-/// fit bends to the rows pulled inwards, and its residuals stay within the
-/// clean limits; their skewness (`CLEAN_SKEWNESS`) sends the fit to the
-/// robust path, whose screening finds the levels inside the range. Before
-/// both, 57 % of the 30 % runs were silently wrong; with the levels found
-/// only on the robust path, 54 %; with the skewness only, 9 %.
+/// the rows: at least 97 % of the runs accepted and at most 2 % silently
+/// wrong (the issue's target at 20-30 %). The plain fit bends to the rows
+/// pulled inwards; the skewness of its residuals (`CLEAN_SKEWNESS`) sends
+/// it to the robust path. The accuracy is not held: the screening no
+/// longer searches for a clip level inside an axis's range (issue 35's
+/// ablation, `docs/robustness.md` section 5, pruned it: 1 148 B), and the
+/// median `e_M` ratio is 1.64 at 20 % and 3.25 at 30 % (1.41 at 30 % with
+/// the search); 1.17 % of the 30 % runs are silently wrong.
 #[test]
-fn an_axis_clipped_on_some_reads_is_found() {
+fn an_axis_clipped_on_some_reads_is_not_silently_wrong() {
     let grid = Grid {
         kinds: vec![Kind::ClipSaturation],
         fractions: vec![0.2, 0.3],
@@ -288,7 +289,8 @@ fn an_axis_clipped_on_some_reads_is_found() {
         for &f in &grid.fractions {
             let cell = study.pooled(&Case::Contaminated(Kind::ClipSaturation, f));
             let what = format!("{} clip {f}", precision.name());
-            assert_cell(&what, &cell, 0.97, 0.02, (1.5, 1.6));
+            // No accuracy target at 20-30 %.
+            assert_cell(&what, &cell, 0.97, 0.02, (f64::INFINITY, f64::INFINITY));
         }
     }
 }
@@ -522,7 +524,7 @@ fn the_report_names_the_window_the_fit_started_without() {
 /// ball never accepted: in 4 of 256 runs the LS fit of its outer rows kept
 /// the fit error just under its limit (0.19-0.20), and those are refused
 /// as a filled cloud, their residuals skewed inwards
-/// (`quality::REFUSE_SKEWNESS`).
+/// (`tuning::REFUSE_SKEWNESS`).
 #[test]
 fn the_ls_fit_alone_is_judged_by_its_shape() {
     let grid = Grid {

@@ -302,7 +302,11 @@ fn warnings_name_their_figures() {
     let (figure, rest) = rest.split_once(", limit ").expect(line);
     let limit = rest.split(')').next().expect(line);
     let (figure, limit): (f64, f64) = (figure.parse().expect(line), limit.parse().expect(line));
-    assert_eq!(limit, mag_cal_core::quality::WARN_GRAM_CONDITION, "{line}");
+    assert_eq!(
+        limit,
+        f64::from(mag_cal_core::Thresholds::DEFAULT.warn_gram_condition),
+        "{line}"
+    );
     assert!(figure > limit, "{line}");
 
     let text = magcal(&["background", &real("mag3_raw_541.csv")]);

@@ -45,9 +45,15 @@ pub enum Error {
         /// The cargo feature of `mag-cal-core` that compiles it in.
         feature: &'static str,
     },
-    /// A given noise covariance is not finite, symmetric and positive
-    /// definite.
-    InvalidNoiseCovariance,
+    /// A configuration value is invalid: a given noise covariance that is
+    /// not finite, symmetric and positive definite (`noise_covariance`), or
+    /// a judging limit that is NaN or out of its range (the
+    /// [`Thresholds`](crate::Thresholds) field's name; see
+    /// [`Thresholds::validate`](crate::Thresholds::validate)).
+    InvalidConfig {
+        /// The field: `noise_covariance`, or a `Thresholds` field.
+        field: &'static str,
+    },
     /// The samples lie near a plane (flat covariance): the third axis is not
     /// observed. Turn the sensor through all orientations.
     Planar {
@@ -164,8 +170,11 @@ impl fmt::Display for Error {
                 f,
                 "this build of mag-cal-core leaves the method out: enable its cargo feature `{feature}`"
             ),
-            Error::InvalidNoiseCovariance => {
-                f.write_str("noise covariance is not finite, symmetric and positive definite")
+            Error::InvalidConfig {
+                field: "noise_covariance",
+            } => f.write_str("noise covariance is not finite, symmetric and positive definite"),
+            Error::InvalidConfig { field } => {
+                write!(f, "the threshold `{field}` is NaN or out of its range")
             }
             Error::Planar { flatness, limit } => write!(
                 f,
@@ -506,7 +515,7 @@ mod tests {
 
     use super::*;
     use crate::device::planar;
-    use crate::judge::quality::{self, Thresholds};
+    use crate::judge::quality::Thresholds;
 
     /// The figure and the limit an error was decided by, when it has them;
     /// an exhaustive match, so that a new variant does not compile here
@@ -521,7 +530,7 @@ mod tests {
             | Error::NoConvergence { .. }
             | Error::MismatchedLengths
             | Error::NotEnabled { .. }
-            | Error::InvalidNoiseCovariance => None,
+            | Error::InvalidConfig { .. } => None,
             Error::Planar { flatness: x, limit }
             | Error::AmbiguousQuadric {
                 quadric_gap: x,
@@ -582,7 +591,7 @@ mod tests {
         NoConvergence,
         MismatchedLengths,
         NotEnabled,
-        InvalidNoiseCovariance,
+        InvalidConfig,
         Planar,
         AmbiguousQuadric,
         ExtremeDistortion,
@@ -668,7 +677,12 @@ mod tests {
             Error::NoConvergence { iterations: 50 },
             Error::MismatchedLengths,
             Error::NotEnabled { feature: "submle" },
-            Error::InvalidNoiseCovariance,
+            Error::InvalidConfig {
+                field: "noise_covariance",
+            },
+            Error::InvalidConfig {
+                field: "refuse_fit_error",
+            },
             Error::NoSphere {
                 fit_error: f(f32::INFINITY),
                 limit: f(th.refuse_fit_error),
@@ -881,7 +895,7 @@ mod tests {
         let misfit = |x: f32| {
             Error::SystematicMisfit {
                 lack_of_fit: Figure::new(x),
-                limit: Figure::new(quality::REFUSE_LACK_OF_FIT as f32),
+                limit: Figure::new(crate::tuning::REFUSE_LACK_OF_FIT as f32),
             }
             .to_string()
         };

@@ -120,12 +120,12 @@
 //!    data pay one extra pass's worth of figures, no robust pass; the LS
 //!    fit alone, whose lack of fit is not judged, makes ADC2's first
 //!    artificial-data pass for its residuals' tails and must not misfit in
-//!    shape, [`CLEAN_SHAPE`]); a plain
+//!    shape, `CLEAN_SHAPE`); a plain
 //!    attempt whose LS residuals already show heavy tails
-//!    ([`CLEAN_KURTOSIS`]), rows pulled inwards ([`CLEAN_SKEWNESS`]) or a
+//!    (`CLEAN_KURTOSIS`), rows pulled inwards (`CLEAN_SKEWNESS`) or a
 //!    residual beyond the limit stops before its solve or its final pass;
 //!    and none is made when an axis's extreme is shared by
-//!    [`CLIP_HINT_ROWS`] rows of a subsample (a clip level, which
+//!    `CLIP_HINT_ROWS` rows of a subsample (a clip level, which
 //!    bends the plain fit without standing out of its residuals);
 //! 3. otherwise screens the rows farther than [`SCREEN_RADIUS`] median
 //!    distances from a coordinate-wise median centre (or, when samples
@@ -137,12 +137,12 @@
 //!    deviations `1.4826 median|r|`, from fixed histograms: no sorting,
 //!    nothing stored per sample), then runs the method with the same
 //!    weights. The screening's histograms and the refits before the last
-//!    one use a fixed subsample of about [`SUBSAMPLE_ROWS`] rows (every
+//!    one use a fixed subsample of about `SUBSAMPLE_ROWS` rows (every
 //!    `k`-th row), so their cost hardly grows with `n`. Where consecutive
 //!    rows lie far beyond the cut (a disturbance passing), the rows beside
 //!    them, displaced less, are left out too ([`runs`]);
 //! 4. when that result is in doubt (lack of fit beyond
-//!    [`DOUBT_LACK_OF_FIT`], or refused for too many outliers or as a
+//!    `DOUBT_LACK_OF_FIT`, or refused for too many outliers or as a
 //!    misfit), scores the robust LS from four more starts, each on the rows
 //!    outside one half of the recording, and from the crude start (the
 //!    median residual over the subsample), and runs step 3 again from the
@@ -150,7 +150,7 @@
 //!    fit into a compromise that keeps it, and one window holds most of it.
 //!    A start whose fit leaves out more rows than a calibration may
 //!    ([`Thresholds::refuse_outlier_share`]) wins when it scores within
-//!    [`AMBIGUOUS_SCORE`] of the best: with a third of the rows displaced,
+//!    `AMBIGUOUS_SCORE` of the best: with a third of the rows displaced,
 //!    the honest reading is a refusal, not a compromise that scores as
 //!    well.
 //!
@@ -248,6 +248,7 @@ mod sample;
 mod steps;
 #[cfg(test)]
 mod test_support;
+mod tuning;
 
 /// The crate README's example runs as a doctest.
 #[cfg(doctest)]
@@ -262,19 +263,18 @@ pub use judge::quality;
 pub use judge::quality::{Quality, RowCounts, Thresholds, Warning, Warnings};
 pub use numerics::real::Real;
 pub use pipeline::calibrate;
-pub use pipeline::{
-    AMBIGUOUS_SCORE, CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SHAPE, CLEAN_SKEWNESS, CLEAN_TAIL,
-    DOUBT_LACK_OF_FIT,
-};
 pub use report::{Fit, Report};
 pub use robust::runs;
 pub use robust::runs::Runs;
-pub use robust::screen::{CLIP_HINT_ROWS, SCREEN_RADIUS, SUBSAMPLE_ROWS};
 pub use sample::{Sample, SampleStore};
 pub use steps::ellipsoid::LsVariant;
-pub use steps::methods::{Method, OUTLIER_CUT};
+pub use steps::methods::Method;
 pub use steps::normalize::MIN_SAMPLES;
 pub use steps::rules::{Drops, Rule, SampleClass, Selection};
+/// The robust path's fixed cuts, for front ends that explain a fit's
+/// outliers (every tuning constant, with its evidence, is in the
+/// crate-private `tuning` module).
+pub use tuning::{CLEAN_LIMIT, CLEAN_TAIL, OUTLIER_CUT, SCREEN_RADIUS};
 
 /// Pieces of the pipeline for this repository's benchmarks and tests
 /// (feature `bench-internals`). Not part of the API: anything here may

@@ -52,8 +52,8 @@ pub struct Report<T: Real> {
     /// The robust LS's start: 0 for the crude start on every row, `k` in
     /// `1..=4` for the rows outside window `k` ([`Report::start_window`]),
     /// when the first result was in doubt (its lack of fit beyond
-    /// [`DOUBT_LACK_OF_FIT`](crate::DOUBT_LACK_OF_FIT)) and the fit from those rows scored best (the
-    /// smallest median residual over every row, [`AMBIGUOUS_SCORE`](crate::AMBIGUOUS_SCORE)).
+    /// `DOUBT_LACK_OF_FIT`) and the fit from those rows scored best (the
+    /// smallest median residual over every row, `AMBIGUOUS_SCORE`).
     pub start: u8,
 }
 

@@ -141,7 +141,9 @@ impl From<Error> for MagcalStatus {
             Error::NoConvergence { .. } => Self::NoConvergence,
             Error::MismatchedLengths => Self::InvalidArgument,
             Error::NotEnabled { .. } => Self::NotEnabled,
-            Error::InvalidNoiseCovariance => Self::InvalidNoiseCovariance,
+            // A threshold is checked by `MagcalConfig::to_core` first
+            // (`INVALID_ARGUMENT`): only the noise covariance reaches here.
+            Error::InvalidConfig { .. } => Self::InvalidNoiseCovariance,
             Error::Planar { .. } => Self::Planar,
             Error::AmbiguousQuadric { .. } => Self::AmbiguousQuadric,
             Error::ExtremeDistortion { .. } => Self::ExtremeDistortion,
@@ -388,7 +390,9 @@ impl MagcalRefusal {
             MagcalStatus::NotEnabled => Error::NotEnabled {
                 feature: FEATURES.get(self.count as usize).map_or("", |(f, _)| f),
             },
-            MagcalStatus::InvalidNoiseCovariance => Error::InvalidNoiseCovariance,
+            MagcalStatus::InvalidNoiseCovariance => Error::InvalidConfig {
+                field: "noise_covariance",
+            },
             MagcalStatus::Planar => Error::Planar {
                 flatness: figure,
                 limit,
@@ -769,7 +773,8 @@ pub unsafe extern "C" fn magcal_config_default(out: *mut MagcalConfig) -> Magcal
 
 impl MagcalConfig {
     /// The core's configuration, or `InvalidArgument` for a value that is
-    /// none of the constants.
+    /// none of the constants or a threshold that is NaN or out of its range
+    /// (`Thresholds::validate`).
     fn to_core(self) -> Result<Config, MagcalStatus> {
         let method = match self.method {
             MAGCAL_METHOD_LS => Method::Ls,
@@ -787,6 +792,9 @@ impl MagcalConfig {
         };
         let positive = |x: f64| (x > 0.0 && x.is_finite()).then_some(x);
         let thresholds = self.thresholds.to_core();
+        thresholds
+            .validate()
+            .map_err(|_| MagcalStatus::InvalidArgument)?;
         Ok(Config {
             method,
             ls,
@@ -1568,6 +1576,23 @@ mod tests {
                 magcal_calibrate_i16(samples.as_ptr(), 4, &bad, out.as_mut_ptr()),
                 MagcalStatus::InvalidArgument
             );
+            // A NaN threshold, and a share above 1.
+            for thresholds in [
+                MagcalThresholds {
+                    refuse_fit_error: f32::NAN,
+                    ..c.thresholds
+                },
+                MagcalThresholds {
+                    refuse_outlier_share: 1.5,
+                    ..c.thresholds
+                },
+            ] {
+                let bad = MagcalConfig { thresholds, ..c };
+                assert_eq!(
+                    magcal_calibrate_i16(samples.as_ptr(), 4, &bad, out.as_mut_ptr()),
+                    MagcalStatus::InvalidArgument
+                );
+            }
             assert_eq!(
                 magcal_calibrate_i16(samples.as_ptr(), 4, &c, out.as_mut_ptr()),
                 MagcalStatus::TooFewSamples
@@ -1673,7 +1698,9 @@ mod tests {
             Error::NoConvergence { iterations: 50 },
             Error::NotEnabled { feature: "submle" },
             Error::NotEnabled { feature: "lg10" },
-            Error::InvalidNoiseCovariance,
+            Error::InvalidConfig {
+                field: "noise_covariance",
+            },
             Error::Planar {
                 flatness: f(0.029_9),
                 limit: f(0.03),

@@ -596,32 +596,33 @@ fn offer_index(offer: Offer) -> usize {
 /// `limits.planar` ([`mag_cal_core::planar::PlanarThresholds::DEFAULT`],
 /// with the number of `sectors` of turn angle counted).
 pub fn info_json() -> Value {
-    use mag_cal_core::{planar, quality};
+    use mag_cal_core::planar;
     let default = Config::default().method;
     let methods: Vec<&str> = std::iter::once(default)
         .chain(Method::ALL.into_iter().filter(|m| *m != default))
         .map(Method::name)
         .collect();
+    let th = mag_cal_core::Thresholds::DEFAULT;
     json!({
         "methods": methods,
         "bands": mag_cal_core::collector::BANDS,
         "sectors": mag_cal_core::collector::SECTORS,
         "cells": mag_cal_core::collector::CELLS,
         "live_capacity": LIVE_CAPACITY,
-        // The measured constants as written (the thresholds hold them as
-        // f32, which would show 0.2 as 0.200000003).
+        // The default thresholds as written: an f32 limit prints its
+        // shortest form (0.2, not 0.200000003 as an f64 would).
         "limits": {
             "3d": {
-                "warn_fit_error": quality::WARN_FIT_ERROR,
-                "refuse_fit_error": quality::REFUSE_FIT_ERROR,
-                "refuse_coverage": quality::REFUSE_COVERAGE,
-                "refuse_flatness": quality::REFUSE_FLATNESS,
-                "refuse_distortion": quality::REFUSE_DISTORTION,
-                "refuse_lack_of_fit": quality::REFUSE_LACK_OF_FIT,
-                "refuse_outlier_share": quality::REFUSE_OUTLIER_SHARE,
+                "warn_fit_error": shortest(th.warn_fit_error),
+                "refuse_fit_error": shortest(th.refuse_fit_error),
+                "refuse_coverage": shortest(th.refuse_coverage),
+                "refuse_flatness": shortest(th.refuse_flatness),
+                "refuse_distortion": shortest(th.refuse_distortion),
+                "refuse_lack_of_fit": shortest(th.refuse_lack_of_fit),
+                "refuse_outlier_share": shortest(th.refuse_outlier_share),
             },
             "planar": {
-                "refuse_fit_error": quality::REFUSE_FIT_ERROR,
+                "refuse_fit_error": shortest(th.refuse_fit_error),
                 "refuse_not_planar": planar::REFUSE_NOT_PLANAR,
                 "min_sectors": planar::MIN_SECTORS,
                 "sectors": planar::SECTORS,
@@ -770,6 +771,11 @@ pub unsafe extern "C" fn mc_live_fit(options: *const u8, len: usize) -> u32 {
     let (code, text) = LIVE.with(|l| l.borrow().fit(options, &clock::now));
     set_out(text);
     code
+}
+
+/// `x` as the f64 of its shortest decimal form.
+fn shortest(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::from(x))
 }
 
 #[cfg(test)]

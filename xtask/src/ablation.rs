@@ -46,18 +46,14 @@ use crate::{firmware_dir, root};
 
 /// The mechanisms, by the name of their gate, with what each does and the
 /// constants it uses (the order of the tables).
-pub const MECHANISMS: [(&str, &str); 14] = [
+pub const MECHANISMS: [(&str, &str); 12] = [
     (
         "clip-hint",
-        "skip the plain fit when an axis's extreme is shared by many rows of the subsample (`screen::CLIP_HINT_ROWS` = 4)",
+        "skip the plain fit when an axis's extreme is shared by many rows of the subsample (`tuning::CLIP_HINT_ROWS` = 4)",
     ),
     (
         "clip-extremes",
-        "drop the rows at an axis's extreme that at least 1/64 of the rows (and 5) share (`rules::CLIP_SHARE`, `CLIP_MIN_ROWS`)",
-    ),
-    (
-        "clip-inside",
-        "clip levels inside an axis's range: a histogram spike, a majority vote, a count on every row (`screen::CLIP_SPIKE` = 3, twice the clip share)",
+        "drop the rows at an axis's extreme that at least 1/64 of the rows (and 5) share (`tuning::CLIP_SHARE`, `CLIP_MIN_ROWS`)",
     ),
     (
         "recentre",
@@ -65,23 +61,19 @@ pub const MECHANISMS: [(&str, &str); 14] = [
     ),
     (
         "trim",
-        "the second and third subsample refits keep at most 70 % of the rows (`refit::TRIM_SHARE` = 0.7, `TRIM_REFITS` = 2)",
+        "the second and third subsample refits keep at most 70 % of the rows (`tuning::TRIM_SHARE` = 0.7, `TRIM_REFITS` = 2)",
     ),
     (
         "runs",
-        "rows beside runs of rejected rows are left out, and not counted as outliers (`runs::RUN_LENGTH` = 6, `STRONG` = 3, `MARGIN` = 30, `RUNS` = 2)",
+        "rows beside runs of rejected rows are left out, and not counted as outliers (`tuning::RUN_LENGTH` = 6, `STRONG` = 3, `MARGIN` = 30, `RUNS` = 2)",
     ),
     (
         "windows",
-        "a result in doubt is scored against the robust LS from 4 window starts, and the best start runs again (`DOUBT_LACK_OF_FIT` = 0.004, `refit::STARTS` = 4)",
+        "a result in doubt is scored against the robust LS from 4 window starts, and the best start runs again (`DOUBT_LACK_OF_FIT` = 0.004, `tuning::STARTS` = 4)",
     ),
     (
         "ambiguous-score",
         "a window start that leaves out more than the outlier share wins within a factor of the best score (`AMBIGUOUS_SCORE` = 1.25)",
-    ),
-    (
-        "gross-kurtosis",
-        "skip the plain fit when the kurtosis of the normalised rows shows gross outliers (`normalize::GROSS_KURTOSIS` = 3)",
     ),
     (
         "kurtosis-gate",
@@ -97,11 +89,11 @@ pub const MECHANISMS: [(&str, &str); 14] = [
     ),
     (
         "misfit-gate",
-        "the plain fit is not clean when its lack of fit is significant and beyond the refusal limit (`quality::REFUSE_LACK_OF_FIT` = 0.01)",
+        "the plain fit is not clean when its lack of fit is significant and beyond the refusal limit (`tuning::REFUSE_LACK_OF_FIT` = 0.01)",
     ),
     (
         "filled-cloud",
-        "refuse a fit whose residuals skew inwards with a high fit error (`quality::REFUSE_SKEWNESS` = -0.6, `WARN_FIT_ERROR` = 0.05)",
+        "refuse a fit whose residuals skew inwards with a high fit error (`tuning::REFUSE_SKEWNESS` = -0.6, `WARN_FIT_ERROR` = 0.05)",
     ),
 ];
 

@@ -53,6 +53,7 @@
 //! assert!(!bg.is_stale());
 //! ```
 
+use crate::tuning::OUTLIER_CUT;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::device::collector;
@@ -66,7 +67,7 @@ use crate::sample::Sample;
 use crate::steps::artificial::AdcPass;
 use crate::steps::ellipsoid::{self, Ellipsoid};
 use crate::steps::final_pass::{DirectionSums, FinalSums};
-use crate::steps::methods::{adc2, OUTLIER_CUT};
+use crate::steps::methods::adc2;
 use crate::steps::moments::{Cut, Moments, MomentsPass};
 use crate::steps::normalize::{Normalization, Projector, MIN_SAMPLES};
 use crate::steps::rules::{check, Gate, Rules};

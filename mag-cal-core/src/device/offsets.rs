@@ -51,6 +51,7 @@
 //! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 
+use crate::tuning::OUTLIER_CUT;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
@@ -58,7 +59,7 @@ use crate::numerics::linalg::{
     cholesky, cholesky_solve, columns_of, from_columns, inverse3, min_max, sym_eigenvalues,
 };
 use crate::sample::Sample;
-use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::methods::robust_sigma;
 use crate::steps::rules::{check, Rules};
 use crate::{Calibration, Error, Figure, Real};
 

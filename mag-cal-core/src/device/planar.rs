@@ -21,7 +21,7 @@
 //!    `a x^2 + b y^2 + 2c xy + 2d x + 2e y = 1`, the two-dimensional LS9,
 //!    refitted without rows whose algebraic residual exceeds
 //!    [`crate::OUTLIER_CUT`] robust standard deviations of the previous
-//!    pass when any exceeds [`crate::CLEAN_LIMIT`];
+//!    pass when any exceeds [`crate::tuning::CLEAN_LIMIT`];
 //! 4. artificial data: the unit vectors `g = W2 (p - c2) / |W2 (p - c2)|`
 //!    of that ellipse and the regression `p ~ T2 g + beta` in closed form
 //!    (ADC2 in two dimensions), then `W2 = (T2 T2^T)^(-1/2)`, `c2 = beta`;
@@ -55,6 +55,7 @@
 //! # Ok::<(), mag_cal_core::planar::Error>(())
 //! ```
 
+use crate::tuning::{CLEAN_LIMIT, OUTLIER_CUT};
 use core::fmt;
 
 use crate::device::heading::{atan2_deg, wrap_deg};
@@ -64,10 +65,10 @@ use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
 use crate::robust::screen::{screen, Unscreened};
 use crate::sample::Sample;
-use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::methods::robust_sigma;
 use crate::steps::normalize::{scan, MIN_SAMPLES};
 use crate::steps::rules::{pieces, Drops, Gate};
-use crate::{Error as FitError, Figure, Real, CLEAN_LIMIT};
+use crate::{Error as FitError, Figure, Real};
 
 /// Why a planar fit was refused: the refusals of its own, or one it shares
 /// with the three-dimensional fit.

@@ -11,7 +11,7 @@ use crate::{Error as FitError, Figure, Real};
 /// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
 /// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
 /// real recording `planar_243.txt` 0.010; a +-30 deg band gives 0.18 and
-/// the full sphere 0.3-1. Between [`crate::judge::quality::REFUSE_FLATNESS`] and
+/// the full sphere 0.3-1. Between `REFUSE_FLATNESS` and
 /// this, both the planar and the three-dimensional fit may run.
 pub const REFUSE_NOT_PLANAR: f64 = 0.06;
 
@@ -40,9 +40,9 @@ impl PlanarThresholds {
     /// The measured constants of this module and of [`crate::judge::quality`].
     pub const DEFAULT: Self = Self {
         refuse_not_planar: REFUSE_NOT_PLANAR as f32,
-        refuse_fit_error: crate::judge::quality::REFUSE_FIT_ERROR as f32,
+        refuse_fit_error: crate::tuning::REFUSE_FIT_ERROR as f32,
         min_sectors: MIN_SECTORS,
-        refuse_outlier_share: crate::judge::quality::REFUSE_OUTLIER_SHARE as f32,
+        refuse_outlier_share: crate::tuning::REFUSE_OUTLIER_SHARE as f32,
     };
 }
 

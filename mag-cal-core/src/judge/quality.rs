@@ -5,11 +5,16 @@
 //! that justify them are documented beside each constant. Refusals are
 //! [`Error`]s; milder findings are [`Warning`]s in the report.
 
+use crate::tuning::{
+    GAP_NOISE_LIMIT, REFUSE_COVERAGE, REFUSE_DISTORTION, REFUSE_FIELD_DEVIATION, REFUSE_FIT_ERROR,
+    REFUSE_FLATNESS, REFUSE_LACK_OF_FIT, REFUSE_OUTLIER_SHARE, REFUSE_QUADRIC_GAP, REFUSE_SKEWNESS,
+    WARN_FIT_ERROR, WARN_FLATNESS, WARN_GRAM_CONDITION, WARN_QUADRIC_GAP, WARN_SAMPLES,
+    WARN_SPREAD_OVER_NOISE,
+};
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use crate::numerics::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
 use crate::steps::final_pass::FinalPass;
-pub use crate::steps::final_pass::{LOF_CELLS, LOF_MIN_ROWS, LOF_SIGNIFICANCE};
 use crate::steps::moments::Moments;
 use crate::{Error, Figure, Real};
 
@@ -57,13 +62,13 @@ pub struct Quality<T: Real> {
     pub fit_error: T,
     /// Lack of fit: the systematic part of the radial residual, in units of
     /// the field. The mean residual `m_c` of the rows used in each of
-    /// [`LOF_CELLS`] direction cells, its noise share `fit_error^2 / n_c`
+    /// `LOF_CELLS` direction cells, its noise share `fit_error^2 / n_c`
     /// removed: `sqrt(max(0, mean_c(m_c^2 - fit_error^2 / n_c)))`. About 0
     /// when the residuals are noise around the ellipsoid; large when a
     /// region of the sphere sits off it (a displaced stretch of the
     /// trajectory that the ellipsoid bends towards). Refused above
     /// [`Thresholds::refuse_lack_of_fit`] when the misfit is also
-    /// significant against the noise ([`LOF_SIGNIFICANCE`]).
+    /// significant against the noise (`LOF_SIGNIFICANCE`).
     pub lack_of_fit: T,
     /// Share of the rows kept by the rules that the fit did not use
     /// (screened out, or residual beyond the cut; not the rows left out
@@ -75,90 +80,9 @@ pub struct Quality<T: Real> {
     /// ([`Thresholds::refuse_skewness`]). Measured by the robust path's
     /// final pass; 0 when the plain fit was taken (its first pass's
     /// residuals were tested for rows pulled inwards instead,
-    /// [`crate::CLEAN_SKEWNESS`]) and in [`crate::background`].
+    /// `CLEAN_SKEWNESS`) and in [`crate::background`].
     pub skewness: T,
 }
-
-/// Fewer samples than this: [`Warning::FewSamples`].
-pub const WARN_SAMPLES: usize = 50;
-/// Flatness below this: [`Error::Planar`]. A single planar circle gives
-/// 0.004 and the real nearly planar recording `planar_243.txt` 0.010; a
-/// +-10 deg band 0.02 (also refused by coverage); a +-30 deg band 0.18
-/// (0.10-0.15 after the simulated test scenarios' distortions).
-pub const REFUSE_FLATNESS: f64 = 0.03;
-/// Flatness below this: [`Warning::NearlyPlanar`].
-pub const WARN_FLATNESS: f64 = 0.1;
-/// Quadric gap below this, on data that fit their ellipsoid to within
-/// [`GAP_NOISE_LIMIT`]: [`Error::AmbiguousQuadric`].
-///
-/// Measured (a simulated sensor with a tilted soft iron, 1000 samples, 20
-/// runs each): two orthogonal great circles give gaps of 1.8-2.5 at every
-/// noise level (0.3 %, noise A, noise B) and errors in `M` of 18-22 %:
-/// a second quadric fits as well as the first, whatever the noise, so the
-/// fit is nonsense. A +-30 deg band gives 860 at 0.3 % noise, 22 at noise A
-/// (errors 0.7 % and 3.7 %) but 2.5 at noise B (16 %): a well-posed
-/// geometry's gap falls as 1/noise^2, an ambiguous one's does not. A gap
-/// below 3 is conclusive only when the noise is small; see
-/// [`GAP_NOISE_LIMIT`].
-pub const REFUSE_QUADRIC_GAP: f64 = 3.0;
-/// Radial RMS below which a small quadric gap refuses the fit. Above it,
-/// noise alone compresses the gap of good geometry below 3 (the design
-/// document's scenario D, a band with 5-10 % noise and radial RMS 0.068,
-/// must calibrate), and the gap only warns. Real sensors here fit with
-/// radial RMS 0.003-0.027.
-pub const GAP_NOISE_LIMIT: f64 = 0.05;
-/// Quadric gap below this: [`Warning::WeakQuadric`].
-pub const WARN_QUADRIC_GAP: f64 = 10.0;
-/// Condition of `M` above this: [`Error::ExtremeDistortion`]. It is an
-/// axis ratio of 4; magnetometer soft iron and scale errors stay within a
-/// few tens of percent (the simulated test scenarios: 2.7).
-pub const REFUSE_DISTORTION: f64 = 16.0;
-/// Coverage below this: [`Error::PoorCoverage`]. Full sphere 0.31-0.33,
-/// +-30 deg band 0.085, +-10 deg band 0.02, a 45 deg cap 0.03 (which passes
-/// every algebraic check yet fits a sphere 0.67x too small).
-pub const REFUSE_COVERAGE: f64 = 0.05;
-/// Gram condition above this: [`Warning::WeakCoverage`] (full sphere about
-/// 3, +-30 deg band about 12; the accuracy of every method degrades on
-/// partial coverage).
-pub const WARN_GRAM_CONDITION: f64 = 20.0;
-/// Relative deviation of the field strength from an expected value above
-/// which the fit is refused ([`Error::FieldStrengthMismatch`]).
-pub const REFUSE_FIELD_DEVIATION: f64 = 0.25;
-/// Spread below this many noise standard deviations:
-/// [`Warning::LowSpread`].
-pub const WARN_SPREAD_OVER_NOISE: f64 = 10.0;
-
-/// Fit error above this: [`Warning::HighFitError`].
-pub const WARN_FIT_ERROR: f64 = 0.05;
-/// Fit error above this: [`Error::NoSphere`]. Measured in simulation
-/// (5th-95th percentiles): noise of 10-20 % per axis 0.13-0.16, isotropic 20 %
-/// noise on a real sphere 0.18-0.19; a filled ball 0.24-0.27, a cube
-/// 0.28-0.30, a stationary device or a blob 0.37-0.44.
-pub const REFUSE_FIT_ERROR: f64 = 0.20;
-/// Share of rows not used above this (not counting the rows beside a run
-/// within the cut, [`crate::robust::runs`]): [`Error::TooManyOutliers`].
-pub const REFUSE_OUTLIER_SHARE: f64 = 0.25;
-/// Lack of fit above this (1 % of the field), significant against the
-/// noise: [`Error::SystematicMisfit`]. Measured on a simulated
-/// contamination study: fits that a displaced patch or a moving
-/// disturbance bent to `e_M` above 0.05 have 0.006-0.04; accepted good fits
-/// of the same data 0.002-0.012; real recordings 0.003-0.011 with the plain
-/// fit, 0.003-0.005 with outlier handling.
-pub const REFUSE_LACK_OF_FIT: f64 = 0.01;
-
-/// Skewness of the radial residuals below this, with a fit error above
-/// [`WARN_FIT_ERROR`]: [`Error::FilledCloud`] (outlier handling only). The
-/// rows of a filled ball lie inside the shell that fits its outer rows, and
-/// an ellipsoid fit of it can keep its fit error just under
-/// [`REFUSE_FIT_ERROR`]: the LS fit alone did so in 4 of 256 runs of the
-/// contamination study (fit error 0.189-0.200, skewness -0.72 to -0.85 in
-/// 24 such runs of 1024). Noise on a shell leaves the residuals nearly
-/// symmetric: the clean scenarios A-G (100 runs each, LS and ADC2) -0.38 at
-/// the lowest, with fit errors up to 0.166; of 4 267 contaminated runs
-/// accepted with a fit error below the warning, a few reached -0.70 (a
-/// fifth of the rows clipped at a lower level), none with a fit error
-/// above it.
-pub const REFUSE_SKEWNESS: f64 = -0.6;
 
 /// The limits the judging applies to the figures of a fit, as a value the
 /// caller can set ([`crate::Config::thresholds`]); [`Thresholds::DEFAULT`]
@@ -166,46 +90,50 @@ pub const REFUSE_SKEWNESS: f64 = -0.6;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Thresholds {
-    /// Fewer rows used than this: [`Warning::FewSamples`].
+    /// Fewer rows used than this: [`Warning::FewSamples`]. Default 50.
     pub warn_samples: usize,
-    /// Flatness below this: [`Error::Planar`].
+    /// Flatness below this: [`Error::Planar`]. Default 0.03.
     pub refuse_flatness: f32,
-    /// Flatness below this: [`Warning::NearlyPlanar`].
+    /// Flatness below this: [`Warning::NearlyPlanar`]. Default 0.1.
     pub warn_flatness: f32,
     /// Quadric gap below this, with radial RMS below
-    /// [`Thresholds::gap_noise_limit`]: [`Error::AmbiguousQuadric`].
+    /// [`Thresholds::gap_noise_limit`]: [`Error::AmbiguousQuadric`]. Default 3.
     pub refuse_quadric_gap: f32,
-    /// See [`GAP_NOISE_LIMIT`].
+    /// Radial RMS below which a small quadric gap refuses the fit; above
+    /// it, noise alone compresses a good geometry's gap, and the gap only
+    /// warns. Default 0.05.
     pub gap_noise_limit: f32,
-    /// Quadric gap below this: [`Warning::WeakQuadric`].
+    /// Quadric gap below this: [`Warning::WeakQuadric`]. Default 10.
     pub warn_quadric_gap: f32,
-    /// Condition of `M` above this: [`Error::ExtremeDistortion`].
+    /// Condition of `M` above this: [`Error::ExtremeDistortion`]. Default 16.
     pub refuse_distortion: f32,
-    /// Coverage below this: [`Error::PoorCoverage`].
+    /// Coverage below this: [`Error::PoorCoverage`]. Default 0.05.
     pub refuse_coverage: f32,
-    /// Gram condition above this: [`Warning::WeakCoverage`].
+    /// Gram condition above this: [`Warning::WeakCoverage`]. Default 20.
     pub warn_gram_condition: f32,
     /// Relative field-strength deviation above this:
-    /// [`Error::FieldStrengthMismatch`].
+    /// [`Error::FieldStrengthMismatch`]. Default 0.25.
     pub refuse_field_deviation: f32,
     /// Spread below this many noise standard deviations:
-    /// [`Warning::LowSpread`].
+    /// [`Warning::LowSpread`]. Default 10.
     pub warn_spread_over_noise: f32,
-    /// Fit error above this: [`Error::NoSphere`].
+    /// Fit error above this: [`Error::NoSphere`]. Default 0.20.
     pub refuse_fit_error: f32,
-    /// Fit error above this: [`Warning::HighFitError`].
+    /// Fit error above this: [`Warning::HighFitError`]. Default 0.05.
     pub warn_fit_error: f32,
-    /// Share of rows not used above this: [`Error::TooManyOutliers`].
+    /// Share of rows not used above this: [`Error::TooManyOutliers`]. Default 0.25.
     pub refuse_outlier_share: f32,
-    /// Lack of fit above this: [`Error::SystematicMisfit`].
+    /// Lack of fit above this: [`Error::SystematicMisfit`]. Default 0.01.
     pub refuse_lack_of_fit: f32,
     /// Skewness of the radial residuals below this, with a fit error above
-    /// [`Thresholds::warn_fit_error`]: [`Error::FilledCloud`].
+    /// [`Thresholds::warn_fit_error`]: [`Error::FilledCloud`]. Default -0.6.
     pub refuse_skewness: f32,
 }
 
 impl Thresholds {
-    /// The measured constants of this module.
+    /// The measured defaults: each value, what it guards and the
+    /// measurement behind it are in the crate's tuning module
+    /// (`mag-cal-core/src/tuning.rs`).
     pub const DEFAULT: Self = Self {
         warn_samples: WARN_SAMPLES,
         refuse_flatness: REFUSE_FLATNESS as f32,
@@ -224,6 +152,55 @@ impl Thresholds {
         refuse_lack_of_fit: REFUSE_LACK_OF_FIT as f32,
         refuse_skewness: REFUSE_SKEWNESS as f32,
     };
+
+    /// Checks every limit once, before a fit uses them: each must be a
+    /// number in its range (shares, flatness and coverage in `[0, 1]`,
+    /// condition limits at least 1, the others at least 0; infinity is
+    /// allowed and turns a check off; the skewness limit may be any number).
+    /// [`calibrate`](crate::calibrate) calls it first; a NaN limit would
+    /// otherwise pass or refuse every fit unseen.
+    ///
+    /// ```
+    /// use mag_cal_core::{Error, Thresholds};
+    /// assert!(Thresholds::DEFAULT.validate().is_ok());
+    /// let t = Thresholds { refuse_fit_error: f32::NAN, ..Thresholds::DEFAULT };
+    /// assert_eq!(t.validate(), Err(Error::InvalidConfig { field: "refuse_fit_error" }));
+    /// ```
+    #[inline]
+    pub fn validate(&self) -> Result<(), Error> {
+        const INF: f32 = f32::INFINITY;
+        let t = self;
+        // One check after the other, not a loop over a table: with a
+        // constant `Config` every check folds away (a loop over a table
+        // kept 716 B in the firmware's footprint build).
+        check("refuse_flatness", t.refuse_flatness, 0.0, 1.0)?;
+        check("warn_flatness", t.warn_flatness, 0.0, 1.0)?;
+        check("refuse_quadric_gap", t.refuse_quadric_gap, 0.0, INF)?;
+        check("gap_noise_limit", t.gap_noise_limit, 0.0, INF)?;
+        check("warn_quadric_gap", t.warn_quadric_gap, 0.0, INF)?;
+        check("refuse_distortion", t.refuse_distortion, 1.0, INF)?;
+        check("refuse_coverage", t.refuse_coverage, 0.0, 1.0)?;
+        check("warn_gram_condition", t.warn_gram_condition, 1.0, INF)?;
+        check("refuse_field_deviation", t.refuse_field_deviation, 0.0, INF)?;
+        check("warn_spread_over_noise", t.warn_spread_over_noise, 0.0, INF)?;
+        check("refuse_fit_error", t.refuse_fit_error, 0.0, INF)?;
+        check("warn_fit_error", t.warn_fit_error, 0.0, INF)?;
+        check("refuse_outlier_share", t.refuse_outlier_share, 0.0, 1.0)?;
+        check("refuse_lack_of_fit", t.refuse_lack_of_fit, 0.0, INF)?;
+        check("refuse_skewness", t.refuse_skewness, -INF, INF)?;
+        Ok(())
+    }
+}
+
+/// `Ok` when `value` lies in `lo..=hi` (NaN does not), else the refusal
+/// naming `field`.
+#[inline(always)]
+fn check(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), Error> {
+    if value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig { field })
+    }
 }
 
 impl Default for Thresholds {
@@ -654,16 +631,16 @@ pub enum Warning {
     /// Some samples were not finite, or too large for the working
     /// precision, and were skipped.
     NonFiniteDropped = 1 << 1,
-    /// Fewer than [`WARN_SAMPLES`] samples.
+    /// Fewer than `WARN_SAMPLES` samples.
     FewSamples = 1 << 2,
-    /// The samples' spread is below [`WARN_SPREAD_OVER_NOISE`] noise
+    /// The samples' spread is below `WARN_SPREAD_OVER_NOISE` noise
     /// standard deviations (only when a noise covariance is given).
     LowSpread = 1 << 3,
-    /// Flatness below [`WARN_FLATNESS`].
+    /// Flatness below `WARN_FLATNESS`.
     NearlyPlanar = 1 << 4,
-    /// Quadric gap below [`WARN_QUADRIC_GAP`].
+    /// Quadric gap below `WARN_QUADRIC_GAP`.
     WeakQuadric = 1 << 5,
-    /// Gram condition above [`WARN_GRAM_CONDITION`]: partial coverage.
+    /// Gram condition above `WARN_GRAM_CONDITION`: partial coverage.
     WeakCoverage = 1 << 6,
     /// Rows were dropped by the glitch rules (exact zeros, rails, repeated
     /// rows; [`crate::Report::drops`] counts them by rule).
@@ -671,7 +648,7 @@ pub enum Warning {
     /// Some rows were screened out or rejected by their residual
     /// ([`crate::Report::screened`], [`crate::Report::rejected`]).
     OutliersRejected = 1 << 8,
-    /// Fit error above [`WARN_FIT_ERROR`]: noisy data, or a sensor that an
+    /// Fit error above `WARN_FIT_ERROR`: noisy data, or a sensor that an
     /// ellipsoid describes only roughly.
     HighFitError = 1 << 9,
 }
@@ -947,6 +924,73 @@ mod tests {
 
     extern crate std;
     use std::string::ToString;
+
+    /// A limit that is NaN or out of its range is refused before any pass,
+    /// naming its field; the defaults and infinite limits (a check turned
+    /// off) pass.
+    #[test]
+    fn thresholds_are_validated_before_the_fit() {
+        let sphere: [[f32; 3]; 200] = core::array::from_fn(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 200.0;
+            let (r, phi) = ((1.0 - z * z).sqrt(), i as f32 * 2.399_963);
+            [
+                40.0 * r * phi.cos() + 5.0,
+                40.0 * r * phi.sin(),
+                40.0 * z - 3.0,
+            ]
+        });
+        let fit = |thresholds| {
+            let config = crate::Config {
+                thresholds,
+                ..crate::Config::DEFAULT
+            };
+            crate::calibrate::<f32, _>(&sphere, &config)
+        };
+        assert!(fit(Thresholds::DEFAULT).is_ok());
+        let off = Thresholds {
+            refuse_fit_error: f32::INFINITY,
+            refuse_skewness: f32::NEG_INFINITY,
+            ..Thresholds::DEFAULT
+        };
+        assert!(fit(off).is_ok());
+        let cases = [
+            (
+                "refuse_fit_error",
+                Thresholds {
+                    refuse_fit_error: f32::NAN,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "refuse_outlier_share",
+                Thresholds {
+                    refuse_outlier_share: 1.5,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "refuse_distortion",
+                Thresholds {
+                    refuse_distortion: 0.5,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+            (
+                "warn_flatness",
+                Thresholds {
+                    warn_flatness: -0.1,
+                    ..Thresholds::DEFAULT
+                },
+            ),
+        ];
+        for (field, t) in cases {
+            assert_eq!(
+                fit(t).err(),
+                Some(Error::InvalidConfig { field }),
+                "{field}"
+            );
+        }
+    }
 
     /// An `f64` figure within 1e-12 of its limit rounds to the limit in
     /// `f32`: the refusal and the warning carry the next `f32` beyond it,

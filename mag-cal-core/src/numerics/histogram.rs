@@ -193,7 +193,7 @@ impl<T: Real> AxisHistograms<T> {
     /// The counter of `v` on axis `a`: 0 below the window (and NaN),
     /// `1..=AXIS_BINS` the bins, `AXIS_BINS + 1` above it.
     #[inline(always)]
-    pub(crate) fn counter_of(&self, a: usize, v: T) -> usize {
+    fn counter_of(&self, a: usize, v: T) -> usize {
         let (Some(&lo), Some(&iw)) = (self.lo.get(a), self.inv_width.get(a)) else {
             return 0;
         };
@@ -227,34 +227,6 @@ impl<T: Real> AxisHistograms<T> {
         for c in self.counts.iter_mut().flatten() {
             *c /= 2;
         }
-    }
-
-    /// The bin (counter index) of axis `a`, in the lower half of the window
-    /// or in the upper one, whose count is largest among those of at least
-    /// `least` counts and `ratio` times each neighbouring bin's: a value
-    /// that many rows share exactly stands out so. `None` when no bin does.
-    pub(crate) fn spike(&self, a: usize, upper: bool, least: u32, ratio: u32) -> Option<usize> {
-        let counts = self.counts.get(a)?;
-        let half = AXIS_BINS / 2;
-        let range = if upper {
-            half + 1..=AXIS_BINS
-        } else {
-            1..=half
-        };
-        let count = |k: usize| u32::from(counts.get(k).copied().unwrap_or(0));
-        let mut best: Option<(usize, u32)> = None;
-        for k in range {
-            let c = count(k);
-            // Neighbours inside the window only (the counters outside it
-            // hold every row beyond).
-            let left = if k > 1 { count(k - 1) } else { 0 };
-            let right = if k < AXIS_BINS { count(k + 1) } else { 0 };
-            let stands_out = c >= least && c >= ratio.saturating_mul(left.max(right).max(1));
-            if stands_out && best.is_none_or(|(_, b)| c > b) {
-                best = Some((k, c));
-            }
-        }
-        best.map(|(k, _)| k)
     }
 
     /// The value of axis `a` below which the share `p` of the counts lie.

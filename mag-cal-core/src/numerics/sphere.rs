@@ -5,10 +5,7 @@
 //! re-centring use it.
 
 use crate::numerics::linalg::dot;
-
-/// Weight `delta` of the midrange prior in the centre solve: `mu = delta
-/// trace(C) / 3`.
-const PRIOR_WEIGHT: f32 = 0.001;
+use crate::tuning::PRIOR_WEIGHT;
 
 /// Running sums of the centre estimate, in `f32`, on `x = y - origin`.
 #[derive(Clone, Copy, Debug)]

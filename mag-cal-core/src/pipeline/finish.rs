@@ -1,6 +1,7 @@
 //! The method's step and the final pass, and the judging of their figures.
 
 use super::*;
+use crate::tuning::{CLEAN_SHAPE, CLEAN_TAIL};
 
 /// A fit and what decides whether the plain one is clean.
 pub(super) struct Finished<T: Real> {
@@ -9,11 +10,11 @@ pub(super) struct Finished<T: Real> {
     pub(super) final_max: T,
     /// The lack of fit is beyond its limit (`Figures::misfit`).
     pub(super) misfit: bool,
-    /// The LS fit alone: its lack of shape is beyond [`CLEAN_SHAPE`] fit
+    /// The LS fit alone: its lack of shape is beyond `CLEAN_SHAPE` fit
     /// errors.
     pub(super) misshapen: bool,
     /// The radial residuals have heavier tails than noise: their RMS is
-    /// above [`CLEAN_TAIL`](crate::CLEAN_TAIL) robust sigmas, and above the level of
+    /// above [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL) robust sigmas, and above the level of
     /// rounding (`sqrt(eps)` of the field), where the tails are the
     /// rounding's own.
     pub(super) heavy_tails: bool,
@@ -57,7 +58,7 @@ pub(super) fn finish<T: Real, S: Sample>(
         (Some(s), None) if config.method == Method::Ls => Some(s),
         (Some(_), None) => None,
     };
-    let limit = sigma.map(|s| s * T::lit(methods::OUTLIER_CUT));
+    let limit = sigma.map(|s| s * T::lit(crate::tuning::OUTLIER_CUT));
     let last = match final_pass::final_pass(
         samples,
         norm,

@@ -13,9 +13,7 @@ use crate::{Calibration, Config, Error, Fit, Method, Real, Report, Sample, Selec
 
 use finish::{finish, judge_failure, method_step};
 use plain::plain_path;
-pub use plain::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SHAPE, CLEAN_SKEWNESS, CLEAN_TAIL};
 use robust::robust_path;
-pub use robust::{AMBIGUOUS_SCORE, DOUBT_LACK_OF_FIT};
 
 /// Calibrates from a slice of raw samples, in precision `T`.
 ///
@@ -40,6 +38,10 @@ pub use robust::{AMBIGUOUS_SCORE, DOUBT_LACK_OF_FIT};
 /// [`Error::NotEnabled`](crate::Error::NotEnabled).
 #[inline(always)]
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
+    // Here, inlined: with a constant `Config` the check folds away (LS9 +
+    // ADC2 40 392 B either way; inside `pipeline`, 41 108 B: `bash
+    // bench.sh flash`).
+    config.thresholds.validate()?;
     let step: methods::Step<T, S> = match config.method {
         Method::Ls => methods::ls_only,
         #[cfg(feature = "adc1")]
@@ -97,12 +99,11 @@ pub(super) enum Route {
     /// handling; with it ([`Config::robust`]), when the plain fit is clean.
     Plain,
     /// The robust path's: outlier handling is on, and the plain path
-    /// refused, failed, or its fit is not clean: gross outliers in the
-    /// moments ([`normalize::GROSS_KURTOSIS`]), residuals with heavy tails
-    /// or pulled inwards in the method's first pass ([`CLEAN_KURTOSIS`],
-    /// [`CLEAN_SKEWNESS`]), a residual beyond [`CLEAN_LIMIT`] robust
+    /// refused, failed, or its fit is not clean: residuals with heavy tails
+    /// or pulled inwards in the method's first pass (`CLEAN_KURTOSIS`,
+    /// `CLEAN_SKEWNESS`), a residual beyond [`CLEAN_LIMIT`] robust
     /// sigmas, an RMS beyond [`CLEAN_TAIL`] of them, a lack of fit beyond
-    /// its limit, or an LS fit misshapen beyond [`CLEAN_SHAPE`].
+    /// its limit, or an LS fit misshapen beyond `CLEAN_SHAPE`.
     Robust,
 }
 
@@ -118,7 +119,7 @@ pub(super) struct Start<'r, T: Real> {
 
 /// Step 1 on the moments: the LS fit, and the quadric gap of the same
 /// scatter (judged after the method, against its radial RMS; see
-/// [`quality::REFUSE_QUADRIC_GAP`](crate::quality::REFUSE_QUADRIC_GAP)). Out of line, so the 10x10 scatter
+/// `REFUSE_QUADRIC_GAP`). Out of line, so the 10x10 scatter
 /// takes stack only while it is used.
 #[inline(never)]
 pub(crate) fn ls_step<T: Real>(

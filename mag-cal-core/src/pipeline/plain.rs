@@ -1,49 +1,7 @@
 //! The plain path: every row the scan kept, weight 1.
 
 use super::*;
-
-/// A plain fit is taken as the robust one when no row's residual exceeds
-/// this many robust standard deviations, in the method's pass and in the
-/// final pass. Beyond it a row cannot be Gaussian noise of that sigma
-/// (probability 6e-7 a row); below it, the 0/1 weights at
-/// [`OUTLIER_CUT`](crate::OUTLIER_CUT) would leave out rows that move the fit by less than the
-/// noise. Clean data then pay no robust pass.
-pub const CLEAN_LIMIT: f64 = 5.0;
-
-/// A plain fit is taken as the robust one only when the RMS of its radial
-/// residuals is at most this many times their robust sigma: about 1 for
-/// Gaussian noise (0.8 for quantisation), more when a share of the rows
-/// lies off the ellipsoid. (Residuals at the level of rounding, an RMS
-/// below the square root of the type's epsilon, are not judged by it.)
-pub const CLEAN_TAIL: f64 = 1.25;
-
-/// A plain fit is not taken when the kurtosis `n sum e^4 / (sum e^2)^2`
-/// of the algebraic residuals `e = |u|^2 - 1` under its LS start (in the
-/// method's artificial-data pass) exceeds this: about 3 for Gaussian
-/// noise, below 2 for quantisation; 10 % of the rows displaced by 0.3 of
-/// the field give about 10. The robust path then starts without the plain
-/// method's solve and final pass.
-pub const CLEAN_KURTOSIS: f64 = 6.0;
-
-/// Nor when the skewness `sqrt(n) sum e^3 / (sum e^2)^(3/2)` of the same
-/// residuals is below minus this: a share of the rows pulled inwards, as
-/// an axis clipped on some reads pulls them (-1.5 when 30 % of the rows
-/// are; the robust path's screening then finds the clip levels). Noise
-/// skews the other way (`e = 2 n + n^2` for a radial noise `n`), and so do
-/// rows displaced outwards, which the kurtosis sees.
-pub const CLEAN_SKEWNESS: f64 = 1.0;
-
-/// Nor, for the LS fit alone, when its lack of fit about the mean radial
-/// residual ([`Quality::lack_of_fit`] without the common offset, which is
-/// the algebraic fit's shrinkage under noise) is significant and exceeds
-/// this many fit errors. LS's lack of fit is not judged, as its criterion
-/// leaves a pattern under noise; but that pattern grows with the noise, a
-/// displaced stretch of rows does not. Measured (f64, LS9): clean
-/// scenarios A-G at most 0.17 (200 runs each, E 0.13-0.17, A and C below
-/// 0.15); plain LS fits bent by a displaced patch or a moving disturbance
-/// (10-30 % of the rows) that passed every other test 0.36 or more, most
-/// above 0.44.
-pub const CLEAN_SHAPE: f64 = 0.3;
+use crate::tuning::{CLEAN_KURTOSIS, CLEAN_LIMIT, CLEAN_SKEWNESS};
 
 /// What [`plain_path`] returns when the robust path answers
 /// ([`Route::Robust`]) and the plain path has no refusal of its own to
@@ -54,7 +12,7 @@ const NOT_TAKEN: Error = Error::NoConvergence { iterations: 0 };
 
 /// The plain pipeline: every row the scan kept, weight 1. Its answer, the
 /// fit or a refusal, stands without outlier handling; with it, only when
-/// the fit is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::CLEAN_TAIL)):
+/// the fit is clean ([`CLEAN_LIMIT`], [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL)):
 /// `route` is then set to [`Route::Plain`], else left as the caller set it
 /// ([`Route::Robust`]). Out of line, as the robust path: inlined, both
 /// paths' locals would share `pipeline`'s frame.
@@ -123,15 +81,6 @@ pub(super) fn plain_start<T: Real, S: Sample>(
         screen: None,
     };
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
-    // (Ablation, docs/robustness.md: `gross-kurtosis` always tries it.)
-    if config.robust
-        && !cfg!(mag_cal_ablate = "gross-kurtosis")
-        && moments.kurtosis() > T::lit(normalize::GROSS_KURTOSIS)
-    {
-        // Gross outliers: not worth a plain fit (the robust path screens;
-        // the route is left to it).
-        return Err(NOT_TAKEN);
-    }
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {
         (Ok(ls), gap) => (ls, gap),

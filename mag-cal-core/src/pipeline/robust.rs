@@ -2,44 +2,13 @@
 //! weights, and the window starts when the result is in doubt.
 
 use super::*;
-
-/// The result of the robust path is in doubt when its lack of fit exceeds
-/// this (0.4 of the default refusal limit,
-/// [`quality::REFUSE_LACK_OF_FIT`](crate::quality::REFUSE_LACK_OF_FIT)), or when it is refused for too many
-/// outliers or as a systematic misfit: the robust LS may have settled on a
-/// compromise that a long disturbance bent. The path then tries the window
-/// starts ([`Report::start`]). Measured on the contamination study
-/// (f32, 256 runs a cell): 0.003 and 0.004 left 22 of 18 688 runs silently
-/// wrong, 0.005 24 (53 without the window starts); of the accepted fits
-/// with a tenth of the rows displaced as a patch or by a moving
-/// disturbance 1-2 % exceed 0.003, the other kinds none. Real recordings
-/// with some model error lie near it (lack of fit 0.003-0.006): at 0.003
-/// `mag3_raw_541.csv` (0.0032) and `imu_gnss_1252.csv` (0.0031) were in
-/// doubt too, and with a magnet passing the first (a CLI test) a window
-/// start that scored a few percent better left the hard iron 0.8 % of the
-/// field (28 counts) from the fit of the clean rows, against 0.02 %.
-pub const DOUBT_LACK_OF_FIT: f64 = 0.004;
-
-/// Among the window starts of a result in doubt, a start whose fit leaves
-/// out more than [`Thresholds::refuse_outlier_share`](crate::Thresholds::refuse_outlier_share) of the rows is
-/// preferred to the best-scoring one when its score (the median residual)
-/// is within this factor of the best: a displaced third of the recording
-/// lets the robust LS either leave it out (and then the result is refused
-/// for too many outliers) or bend into a compromise whose residuals spread
-/// over every row, with a median as low. Measured on the contamination
-/// study (f32, 256 runs a cell): with a third of the rows displaced as a
-/// patch the compromise left 12 runs accepted and silently wrong, 2 with
-/// this preference (the others refused, too many outliers); in all, 22 of
-/// 18 688 runs were silently wrong before it and 12 after, and no cell up
-/// to a fifth of the rows changed. 1.1 left 17 of them, 1.5 as 1.25, and 2
-/// refused 2 % of the runs with a fifth of the rows displaced as a patch.
-pub const AMBIGUOUS_SCORE: f64 = 1.25;
+use crate::tuning::{AMBIGUOUS_SCORE, DOUBT_LACK_OF_FIT};
 
 /// The robust pipeline (section 14 of the design document): screening, the
 /// robust LS fit, the method with 0/1 weights. When the result is in doubt
-/// ([`DOUBT_LACK_OF_FIT`](crate::DOUBT_LACK_OF_FIT)), the robust LS from each of the window starts
-/// ([`refit::STARTS`]) and from the crude start is scored (the median
-/// residual over the subsample, [`refit::window`], [`AMBIGUOUS_SCORE`](crate::AMBIGUOUS_SCORE)),
+/// (`DOUBT_LACK_OF_FIT`), the robust LS from each of the window starts
+/// (`STARTS`) and from the crude start is scored (the median
+/// residual over the subsample, [`refit::window`], `AMBIGUOUS_SCORE`),
 /// and the path runs
 /// again from the window start that scored best; when the crude start
 /// scores best, the first run's fit stands. The screening does not depend
@@ -96,7 +65,7 @@ pub(super) fn best_start<T: Real, S: Sample>(
     *passes = passes.saturating_add(screening.passes);
     // The start that scores best, and its score.
     let mut best: Option<(usize, T)> = None;
-    for k in 0..=refit::STARTS {
+    for k in 0..=crate::tuning::STARTS {
         let (score, made) = robust_score(samples, config, scan, &screening, ls_solve, k);
         *passes = passes.saturating_add(made);
         if let Some(s) = score.filter(|&s| best.is_none_or(|(_, b)| s < b)) {
@@ -110,7 +79,7 @@ pub(super) fn best_start<T: Real, S: Sample>(
 #[derive(Default)]
 pub(super) struct Attempt {
     /// The result is in doubt: its lack of fit is beyond
-    /// [`DOUBT_LACK_OF_FIT`](crate::DOUBT_LACK_OF_FIT), or it is refused for it or for too many
+    /// `DOUBT_LACK_OF_FIT`, or it is refused for it or for too many
     /// outliers.
     doubt: bool,
     /// The robust passes it made (with those before it).
@@ -154,7 +123,7 @@ pub(super) fn robust_attempt<T: Real, S: Sample>(
 
 /// The score of the robust LS from start `k` (`None` when it fails) and
 /// the passes it took: the median residual ([`refit::score`]), divided by
-/// [`AMBIGUOUS_SCORE`](crate::AMBIGUOUS_SCORE) when the fit leaves out more than
+/// `AMBIGUOUS_SCORE` when the fit leaves out more than
 /// [`Thresholds::refuse_outlier_share`](crate::Thresholds::refuse_outlier_share) of the rows. Out of line, as
 /// [`robust_attempt`] (the discount inside the scoring loop took 32 bytes
 /// of the robust path's frame, on every contaminated calibration).

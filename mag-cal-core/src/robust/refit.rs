@@ -6,14 +6,14 @@
 //! it to. The robust fit starts instead from the crude sphere of the
 //! screening ([`crate::robust::screen`]):
 //!
-//! 1. LS9 moments over the [`crate::robust::screen::CRUDE_SHARE`] of the screened
+//! 1. LS9 moments over the `CRUDE_SHARE` of the screened
 //!    samples closest to the crude sphere (median centre, median distance);
 //! 2. weighted LS refits on the moments, weight 1 when the algebraic
 //!    residual `|e| = ||u|^2 - 1| / 2` under the previous fit is at most
-//!    [`crate::steps::methods::OUTLIER_CUT`]` sigma_e`, with
+//!    [`crate::tuning::OUTLIER_CUT`]` sigma_e`, with
 //!    `sigma_e = 1.4826 median|e|` from the pass before (lagged one pass,
 //!    so each refit is one pass). On the subsample (below), for
-//!    [`TRIM_REFITS`] refits, the cut is also at most the [`TRIM_SHARE`]
+//!    `TRIM_REFITS` refits, the cut is also at most the `TRIM_SHARE`
 //!    quantile of `|e|` from the pass before: such a refit fits at most
 //!    that share of the rows, those closest to the fit before (a
 //!    concentration step of least trimmed squares).
@@ -27,7 +27,7 @@
 //!    subsample a few more refits before its count settles).
 //!
 //! The crude start and the refits run on a fixed subsample of about
-//! [`crate::robust::screen::SUBSAMPLE_ROWS`] rows until its count of rows kept
+//! `SUBSAMPLE_ROWS` rows until its count of rows kept
 //! settles (changes by at most one). From the crude start, the untrimmed
 //! refits on the subsample also find the runs of rows far beyond the cut
 //! ([`crate::robust::runs`]; six consecutive rows of the subsample), those of the
@@ -51,14 +51,14 @@
 //! refits: from the subsample's fit alone, a recording of level turns (the
 //! heading scenario of the paper tables) was refused as a systematic
 //! misfit. Without a subsample (fewer than twice
-//! [`crate::robust::screen::SUBSAMPLE_ROWS`] rows) up to [`REFITS`] passes run on
+//! `SUBSAMPLE_ROWS` rows) up to `REFITS` passes run on
 //! every row until the count repeats, the third finding the runs and
 //! refitting nothing (a limit of zero keeps no row).
 //!
 //! A disturbance of a fifth of the recording or more can bend the fit from
 //! the crude start into a compromise that keeps nearly every row. When the
-//! result is in doubt (`crate::DOUBT_LACK_OF_FIT`), the pipeline runs the
-//! robust path again with [`STARTS`] window starts beside the crude one,
+//! result is in doubt (`crate::tuning::DOUBT_LACK_OF_FIT`), the pipeline runs the
+//! robust path again with `STARTS` window starts beside the crude one,
 //! each from the rows outside half of the recording, and the fit with the
 //! smallest median residual wins ([`robust_ls`]).
 //! Each pass on every row
@@ -67,6 +67,7 @@
 //! 10 % contaminated run, `docs/benchmarks.md`). The method's own passes
 //! then run with the same gate and a residual cut.
 
+use crate::tuning::{OUTLIER_CUT, REFITS, STARTS, TRIM_REFITS, TRIM_SHARE};
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
@@ -75,44 +76,11 @@ use crate::robust::runs::Runs;
 use crate::robust::screen::{stride, Screening};
 use crate::sample::Sample;
 use crate::steps::ellipsoid::{fit_with, Ellipsoid, Solve};
-use crate::steps::methods::{robust_sigma, OUTLIER_CUT};
+use crate::steps::methods::robust_sigma;
 use crate::steps::moments::{Cut, Moments};
 use crate::steps::normalize::{Normalization, Projector};
 use crate::steps::rules::Gate;
 use crate::{Error, Real};
-
-/// Cap on the weighted LS refits after the crude start.
-pub const REFITS: u32 = 8;
-
-/// A trimmed refit on the subsample keeps at most this share of the rows
-/// the gate passes: those with the smallest residuals under the fit
-/// before. Measured on the contamination study (f32, 64 runs a cell, every
-/// subsample refit trimmed): 0.5 and 0.6 left 68 and 61 of 18 688 runs
-/// silently wrong, 0.7 51, 0.8 59 (62 without trimming); trimming the
-/// refits on every row as well raised the error ratio at 10 %
-/// contamination to 1.3-1.5.
-pub const TRIM_SHARE: f64 = 0.7;
-
-/// The trimmed refits on the subsample: the second and the third. Later
-/// refits cut at [`OUTLIER_CUT`]` sigma` only, so that the sigma the refits
-/// on every row start from is that of an untrimmed fit: a trimmed fit
-/// follows its best rows, and on a real recording (`mag3_raw_541.csv`,
-/// model error beside the noise) with every subsample refit trimmed its
-/// sigma was 0.0115 against 0.0146, and the refits on every row then cut
-/// 16 rows instead of 4. One trimmed refit left a patch of 10 % at 94.1 %
-/// accepted, two at 98.0 %, three at 98.4 % (one subsample pass more,
-/// about 85 k instructions on a Cortex-M4F at n = 1000).
-pub const TRIM_REFITS: u32 = 2;
-
-/// The window starts ([`window`]): start `k = 1..=STARTS` leaves out half
-/// of the rows, from `(k - 1) n / STARTS` on (wrapping at the end). A
-/// disturbance that lasts less than a quarter of the recording lies wholly
-/// in one window, one of up to 30 % mostly. Measured on the contamination
-/// study (f64, 256 runs a cell, every robust run with window starts, in
-/// an earlier form): four windows left a 30 % patch 5 of 256 runs silently
-/// wrong, eight windows 6, six 6, and four windows leaving out a quarter
-/// each 11.
-pub const STARTS: usize = 4;
 
 /// The robust LS fit and what the method's passes need from it.
 #[derive(Clone, Copy, Debug)]
@@ -142,14 +110,14 @@ fn fit_moments<T: Real>(moments: &Moments<T>, solve: Solve<T>) -> Result<Ellipso
 struct Spread<T: Real> {
     /// Robust sigma, `1.4826 median|e|`.
     sigma: T,
-    /// The [`TRIM_SHARE`] quantile of `|e|`.
+    /// The `TRIM_SHARE` quantile of `|e|`.
     trim: T,
 }
 
 /// One weighted LS refit pass: the moments of the rows whose algebraic
 /// residual under `ls` is within `limit` (with `sums`; without, none),
 /// what the residuals under `ls` measure (for the next pass), and into
-/// `runs`, when given, the runs of rows beyond [`crate::robust::runs::STRONG`]
+/// `runs`, when given, the runs of rows beyond `STRONG`
 /// times the limit ([`crate::robust::runs`]). Out of line: its histogram takes
 /// stack only during the pass.
 #[inline(never)]
@@ -167,7 +135,7 @@ fn weighted_moments<T: Real, S: Sample>(
 ) -> (Moments<T>, Option<Spread<T>>) {
     let norm = &screening.norm;
     let mut hist = LogHistogram::new();
-    let find = runs.map(|r| (r, limit * T::lit(crate::robust::runs::STRONG)));
+    let find = runs.map(|r| (r, limit * T::lit(crate::tuning::STRONG)));
     let cut = Cut {
         map: Projector::new(norm, &ls.centre, &ls.w),
         // A limit of zero keeps no row: no moments to sum.
@@ -191,7 +159,7 @@ fn weighted_moments<T: Real, S: Sample>(
 
 /// The moments of the crude start: the rows `gate` passes (the rules and
 /// the screening ball of `screening`) outside `window` within the band
-/// around the crude sphere that holds [`crate::robust::screen::CRUDE_SHARE`] of
+/// around the crude sphere that holds `CRUDE_SHARE` of
 /// them, in the screening's normalised coordinates. Out of line (stack, as
 /// [`robust_ls`]).
 #[inline(never)]
@@ -217,7 +185,7 @@ pub(crate) fn crude_moments<T: Real, S: Sample>(
 
 /// Start `k` of the robust LS: for `k = 0` the crude start on every row,
 /// for `k = 1..=STARTS` on the rows outside window `k - 1` of
-/// [`STARTS`], which leaves out the rows `q n / STARTS .. q n / STARTS + n
+/// `STARTS`, which leaves out the rows `q n / STARTS .. q n / STARTS + n
 /// / 2` (`q = k - 1`, in the samples' order, wrapping at the end): half
 /// the rows. The rows the start leaves out, as spans (none for `k = 0`
 /// or beyond `STARTS`).

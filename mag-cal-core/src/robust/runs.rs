@@ -4,9 +4,9 @@
 //! A disturbance that passes the sensor (a magnet, a motor, a steel door)
 //! displaces a stretch of consecutive rows, and the rows at its edges are
 //! displaced by less than the residual cut: they pass it and bend the fit.
-//! So where [`RUN_LENGTH`] consecutive rows have a residual beyond
-//! [`STRONG`] times the cut, the rows from [`MARGIN`] before the first of
-//! them to [`MARGIN`] after the last are left out of the passes that follow
+//! So where `RUN_LENGTH` consecutive rows have a residual beyond
+//! `STRONG` times the cut, the rows from `MARGIN` before the first of
+//! them to `MARGIN` after the last are left out of the passes that follow
 //! (spans that touch merge). Rejected rows scattered in time (glitches,
 //! isolated displacements) leave their neighbours alone.
 //!
@@ -28,7 +28,7 @@
 //! count as outliers ([`crate::Quality::outlier_share`]): counted, they
 //! refused a quarter of the patches of 20 % (66 -> 50 % accepted).
 //!
-//! Runs of any rejected rows (a factor of 1 instead of [`STRONG`], 10 rows
+//! Runs of any rejected rows (a factor of 1 instead of `STRONG`, 10 rows
 //! each side) also caught the clean rows that a fit bent by a patch of
 //! 30 % rejects beside the patch, and leaving out their neighbours bent it
 //! further: 72 runs silently wrong (patch 30 %: 6.6 -> 13.3 %); a factor
@@ -37,24 +37,8 @@
 //! consecutive ones (a factor of 1), every run of isolated displacements
 //! of 20 % was refused: too many rows left out.
 
-/// This many consecutive rows with a residual beyond [`STRONG`] times the
-/// cut are a run.
-pub const RUN_LENGTH: usize = 6;
-
-/// A row counts towards a run when its residual exceeds the cut by this
-/// factor (the core of a disturbance, not the edge of a bent fit).
-pub const STRONG: f64 = 3.0;
-
-/// Rows left out on each side of a run (20 gave the moving disturbance of
-/// 10 % ratios of 1.18 / 1.25 and 54 runs silently wrong, 30 1.16 / 1.23
-/// and 53).
-pub const MARGIN: usize = 30;
-
-/// The most spans kept. Each span costs 8 bytes in every copy of the
-/// spans (the report's [`crate::Selection`], the robust path's weights):
-/// with 4, LS9 + ADC2 on contaminated data took 4 108 bytes of stack on a
-/// Cortex-M4F, over its 4 KiB budget; with 2, 4 076.
-pub const RUNS: usize = 2;
+pub use crate::tuning::RUNS;
+use crate::tuning::{MARGIN, RUN_LENGTH};
 
 /// The spans of rows left out beside runs of rejected rows: half-open
 /// ranges `start..end` of row indices, ascending and disjoint.

@@ -4,20 +4,21 @@
 //! Before any fit sees them, samples far from the cloud are screened out:
 //!
 //! 1. a coordinate-wise median centre `c`, from nested histograms per axis
-//!    (nested linear histograms) of a subsample ([`SUBSAMPLE_ROWS`]): each
+//!    (nested linear histograms) of a subsample (`SUBSAMPLE_ROWS`): each
 //!    pass narrows every axis's window to the bins holding its middle
-//!    half, until that half spans at least [`RESOLVED_BINS`] bins (1-2
+//!    half, until that half spans at least `RESOLVED_BINS` bins (1-2
 //!    passes on data without wild values, 3-4 with values 100 times the
 //!    field away). The first of these passes also finds the clip levels:
-//!    an axis's extreme value that many rows share, or a value inside its
-//!    range that many rows share exactly (an axis clipped on some reads
-//!    only), whose bin stands out of its neighbours ([`CLIP_SPIKE`]; two
-//!    more passes, only when one does);
+//!    an axis's extreme value that many rows share (one more pass over
+//!    every row confirms it, only when there is one). A level inside the
+//!    range (an axis clipped on some reads only) is not searched for: it
+//!    changed no target of the contamination table (`docs/robustness.md`,
+//!    section 5);
 //! 2. the median distance `m = median |y - c|` (one pass, a logarithmic histogram);
 //!    samples farther than [`SCREEN_RADIUS`]` m` are screened out;
 //! 3. the crude sphere `(c, m)`: one more pass measures `| |y - c| - m |`
 //!    of the samples kept, giving the band around the sphere that holds
-//!    [`CRUDE_SHARE`] of them (the crude LS start fits only those, which
+//!    `CRUDE_SHARE` of them (the crude LS start fits only those, which
 //!    escapes a displaced patch of the trajectory) and the sphere's own
 //!    robust fit error (the refusal figure when no ellipsoid can be fitted
 //!    at all: a device lying still, a noise ball).
@@ -28,10 +29,10 @@
 //!    step 2 leaves out the far side (on such a real recording, 37 % of
 //!    the samples, and the fit was refused as planar). When the ball
 //!    leaves out at least a sixteenth more of the rows within
-//!    [`RECENTRE_RADIUS`]` m` than it holds ([`RECENTRE_MORE_ROWS`]), an
+//!    `RECENTRE_RADIUS`` m` than it holds (`RECENTRE_MORE_ROWS`), an
 //!    algebraic (Kasa) sphere fit of those rows gives a second centre
 //!    (three more passes), which replaces the median centre when its
-//!    sphere's fit error is less than half ([`RECENTRE_GAIN`]) and its
+//!    sphere's fit error is less than half (`RECENTRE_GAIN`) and its
 //!    ball holds that many more rows. Wild rows lie beyond the radius, so
 //!    contaminated data with even coverage do not pay for it.
 //!
@@ -43,93 +44,21 @@ use crate::numerics::linalg::{larger, smaller};
 use crate::numerics::sphere::CentreFit;
 use crate::sample::Sample;
 use crate::steps::normalize::{Normalization, Scan};
-use crate::steps::rules::{
-    check, count_drops, every, pieces, Ball, Drops, Gate, Rules, CLIP_MIN_ROWS, CLIP_SHARE,
+use crate::steps::rules::{check, count_drops, every, pieces, Ball, Drops, Gate, Rules};
+use crate::tuning::{
+    CLIP_HINT_ROWS, CLIP_MIN_ROWS, CLIP_SHARE, CRUDE_SHARE, MAX_LEVELS, RECENTRE_GAIN,
+    RECENTRE_MORE_ROWS, RECENTRE_RADIUS, RESOLVED_BINS, SCREEN_RADIUS, SUBSAMPLE_ROWS,
 };
 use crate::Real;
 
-/// Samples farther from the median centre than this many median distances
-/// are screened out. A sphere's samples lie at most 1 median distance (plus
-/// noise) from its centre, an ellipsoid of axis ratio 4 (the largest
-/// distortion accepted) at most 2.
-pub const SCREEN_RADIUS: f64 = 2.5;
-/// The share of the screened samples, closest to the crude sphere, that
-/// the crude LS start fits.
-pub const CRUDE_SHARE: f64 = 0.7;
-/// The median is resolved when the middle half of an axis spans this many
-/// bins: its bins are then at most a sixteenth of that axis's
-/// inter-quartile range, and the interpolated median is closer still.
-pub const RESOLVED_BINS: usize = 16;
-/// Cap on the nested histogram passes.
-pub const MAX_LEVELS: u32 = 12;
-/// A bin of the first screening pass's per-axis histogram that holds at
-/// least this many times the rows of each neighbour (and a clip level's
-/// share of all rows) is searched for a value that many rows share
-/// exactly: a clip level inside the range. On a sphere an axis's values
-/// are spread evenly (neighbouring bins hold about as many rows).
-pub const CLIP_SPIKE: u32 = 3;
-/// The algebraic sphere fit that may replace the median centre sees the
-/// rows within this many median distances of it: the far side of a sphere
-/// whose samples crowd on one side (median distance down to a third of the
-/// radius, the median centre near the crowded side) is within 6.
-pub const RECENTRE_RADIUS: f32 = 6.0;
-/// The algebraic sphere replaces the median centre's only where the
-/// median centre is clearly off: its robust shell error is below this
-/// fraction of the median centre's, and its ball holds more rows (see
-/// [`RECENTRE_MORE_ROWS`]). Elsewhere the median centre's robustness to
-/// wild rows is kept.
-pub const RECENTRE_GAIN: f64 = 0.5;
-/// ... at least `1 / RECENTRE_MORE_ROWS` (a sixteenth) more rows than the
-/// median centre's ball: the far side of a sphere that the median
-/// centre's ball left out. The algebraic sphere is only fitted when the
-/// median centre's ball leaves out that many of the rows within
-/// [`RECENTRE_RADIUS`] median distances, which wild rows (beyond that
-/// radius) do not: contaminated data with even coverage pay nothing. On a
-/// cap, whose rows the median centre's ball holds all of, the median
-/// centre stays (the coverage refusal then names the cause).
-pub const RECENTRE_MORE_ROWS: u32 = 16;
-
-/// The median centre's histograms (with the candidate clip levels), the
-/// median distance, the shell band and the crude start, and the robust LS
-/// refits before the last one (which also find the runs of rejected rows,
-/// [`crate::robust::runs`]), run on a fixed subsample of about this many rows
-/// (every `k`-th row, `k` at least 1). A quantile or the set of outliers
-/// is settled as well on a few hundred rows as on all of them, at a
-/// fraction of the passes' cost. The bounds of the first median-centre
-/// window come from it too; the count that confirms a clip level and the
-/// last refit see every row. The median centre's first histogram on every
-/// row instead cost about 125 instructions a row on a Cortex-M4F (LS9 +
-/// ADC2, n = 1000, a tenth of the rows displaced: 1.74 M -> 1.67 M
-/// instructions) and the contamination study's f32 runs silently wrong
-/// moved from 15 to 14 of 18 688.
-pub const SUBSAMPLE_ROWS: usize = 256;
-
-/// The subsample stride for `rows` rows ([`SUBSAMPLE_ROWS`]).
+/// The subsample stride for `rows` rows (`SUBSAMPLE_ROWS`).
 pub(crate) fn stride(rows: usize) -> usize {
     (rows / SUBSAMPLE_ROWS).max(1)
 }
 
-/// The plain path is not tried when an extreme of an axis is shared by at
-/// least this many rows of the subsample (every `k`-th row,
-/// [`SUBSAMPLE_ROWS`]) that the scan's rules keep, and by at most half of
-/// them: a clip level may lie there (the clip rule drops an extreme that
-/// a sixty-fourth of all the rows share), and only screening looks for
-/// one. Rows clipped a little inside the sphere (a range that ends just
-/// below the field) bend the plain fit without standing out of its
-/// residuals: with 2 % of the rows clipped so, the plain fit passed as
-/// clean in 4 of 5 runs of the contamination study, with median error
-/// ratios of 1.35 / 1.52 to the fit of the clean rows (1.02 / 1.04 with
-/// this hint). Of 1000 rows the subsample holds a third. Measured on the
-/// study's clean runs (1000 and 600 rows, 415 counts or 52 uT, 1 % noise):
-/// 3 rows sent 4 of 128 integer runs past the plain fit, 4 none of 256;
-/// every run with 2 % of the rows clipped at one level went to screening,
-/// about half of those with 1 %. Cost on a Cortex-M4F: about 47
-/// instructions a subsampled row (LS9 + ADC2 at n = 1000: about +15 600).
-pub const CLIP_HINT_ROWS: u32 = 4;
-
 /// Whether an extreme of an axis over the subsample (every
 /// [`stride`]`(used)`-th row that `gate` passes) is shared by at least
-/// [`CLIP_HINT_ROWS`] of its rows and at most half of them: one pass over
+/// `CLIP_HINT_ROWS` of its rows and at most half of them: one pass over
 /// the subsample (about 47 instructions a subsampled row on a Cortex-M4F
 /// when no rule drops a row).
 #[inline(never)]
@@ -226,7 +155,7 @@ pub(crate) struct Screening<T: Real> {
     /// The normalisation of the robust path: median centre, scale `m`.
     pub norm: Normalization<T>,
     /// Half-width of the band `| |y - c| - m | <= band` that holds
-    /// [`CRUDE_SHARE`] of the screened samples, sensor units.
+    /// `CRUDE_SHARE` of the screened samples, sensor units.
     pub band: T,
     /// Robust fit error of the crude sphere:
     /// `1.4826 median | |y - c| / m - 1 |` over the screened samples.
@@ -351,7 +280,7 @@ struct Shell<T: Real> {
     m: T,
     /// The screening ball, radius [`SCREEN_RADIUS`]` m`.
     ball: Ball<T>,
-    /// Half-width of the band holding [`CRUDE_SHARE`] of the rows inside
+    /// Half-width of the band holding `CRUDE_SHARE` of the rows inside
     /// the ball, sensor units.
     band: T,
     /// `1.4826 median | |y - c| / m - 1 |` over the rows inside the ball.
@@ -398,12 +327,12 @@ fn shell<T: Real, S: Sample>(
 /// when it has none; and the passes it took (two, subsampled).
 ///
 /// Kasa's fit (the running sphere fit of [`crate::numerics::sphere`]) over
-/// the subsampled rows within [`RECENTRE_RADIUS`]` m` of the median centre
+/// the subsampled rows within `RECENTRE_RADIUS`` m` of the median centre
 /// `c`, in units of `m` about `c` (so that `f32` suffices whatever the
 /// offset): exact for samples on any part of a sphere, however unevenly
 /// the device dwelt. Its least-squares weights make it sensitive to wild
 /// rows inside that ball, which is why it only replaces the median centre
-/// when it fits the shell better ([`RECENTRE_GAIN`]). Out of line, as
+/// when it fits the shell better (`RECENTRE_GAIN`). Out of line, as
 /// [`shell`].
 #[inline(never)]
 fn recentre<T: Real, S: Sample>(
@@ -474,7 +403,7 @@ fn kasa_rows<T: Real, S: Sample>(
 
 /// The coordinate-wise median of the rows the scan's rules keep, the mean
 /// of the axes' inter-quartile ranges, the rules with the clip levels found
-/// in the first pass (rows at the scan's extremes, [`crate::steps::rules::CLIP_SHARE`]),
+/// in the first pass (rows at the scan's extremes, `CLIP_SHARE`),
 /// and the passes it took.
 fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
     let rows = Gate {
@@ -518,8 +447,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
                 );
             }
             let mut levels = clip_levels(sub_rows, (&box_lo, &box_hi), &at);
-            level_passes = interior_levels(samples, &gate, &h, every, sub_rows, &mut levels);
-            level_passes += confirm_levels(samples, &gate, scan.used, &mut levels);
+            level_passes = confirm_levels(samples, &gate, scan.used, &mut levels);
             rules = Rules {
                 glitches: scan.rules.glitches,
                 ..Rules::with_clip(levels)
@@ -621,8 +549,8 @@ fn fill_first<T: Real, S: Sample>(
 }
 
 /// The candidate clip levels: an axis's extreme value that at least
-/// [`crate::steps::rules::CLIP_SHARE`] of the `used` rows of the subsample (and
-/// [`crate::steps::rules::CLIP_MIN_ROWS`]) share, but not most of them: an axis
+/// `CLIP_SHARE` of the `used` rows of the subsample (and
+/// `CLIP_MIN_ROWS`) share, but not most of them: an axis
 /// that hardly varies (planar data) is no clipping ([`confirm_levels`]
 /// counts them on every row).
 fn clip_levels<T: Real>(
@@ -650,97 +578,9 @@ fn clip_levels<T: Real>(
     out
 }
 
-/// Candidate clip levels inside an axis's range: a value that many rows
-/// share exactly, on a side of an axis whose extreme is no clip level. A clip
-/// that left some rows beyond it (an axis clipped on some reads only) puts
-/// such a value inside the range, where the extremes' count does not see
-/// it; its bin of the first pass's histogram `h`
-/// (of the `counted` rows of the subsample, every `stride`-th) stands
-/// out of its neighbours ([`CLIP_SPIKE`]), where that histogram
-/// resolves the axis, and holds at least twice a clip level's share (with
-/// once the share, a bin of a few rows stood out by chance on the
-/// benchmark's sphere with a tenth of its rows displaced, and the search
-/// ran for nothing). Only when one does, one pass over the subsample: a
-/// majority vote among the rows in that bin gives a candidate value,
-/// which [`confirm_levels`] counts on every row. Returns the passes
-/// taken.
-#[inline(never)]
-fn interior_levels<T: Real, S: Sample>(
-    samples: &[S],
-    gate: &Gate<T>,
-    h: &AxisHistograms<T>,
-    stride: usize,
-    counted: usize,
-    levels: &mut [[T; 2]; 3],
-) -> u32 {
-    if cfg!(mag_cal_ablate = "clip-inside") {
-        // Ablation (docs/robustness.md): no level inside the range.
-        return 0;
-    }
-    // The subsample's bins hold a few rows each, and one of them stands out
-    // of its neighbours by chance unless it holds twice a clip level's
-    // share.
-    let least = u32::try_from(2 * clip_rows(counted)).unwrap_or(u32::MAX);
-    // Per axis and side the bin to look in (0: none; the counter index
-    // otherwise, never 0, the counter below the window).
-    let mut bins = [[0usize; 2]; 3];
-    for (a, (b, l)) in bins.iter_mut().zip(levels.iter()).enumerate() {
-        // Only where the window resolves the axis (its middle half spans
-        // RESOLVED_BINS bins): with wild values in the window, the whole
-        // cloud sits in a few bins, which stand out of their empty
-        // neighbours.
-        let resolved = match (h.quantile(a, T::lit(0.25)), h.quantile(a, T::lit(0.75))) {
-            (Place::In(k1, _), Place::In(k3, _)) => k3 + 1 >= k1 + RESOLVED_BINS,
-            _ => false,
-        };
-        for (side, (bin, level)) in b.iter_mut().zip(l).enumerate() {
-            if resolved && !(level.abs() < T::MAX) {
-                *bin = h.spike(a, side == 1, least, CLIP_SPIKE).unwrap_or(0);
-            }
-        }
-    }
-    if bins.iter().flatten().all(|&k| k == 0) {
-        return 0;
-    }
-    // Boyer-Moore majority vote per bin: the value a majority of the bin's
-    // rows share, if any (`confirm_levels` counts it).
-    let mut votes = [[(T::zero(), 0u32); 2]; 3];
-    for (prev, block) in pieces(samples, crate::steps::moments::BLOCK) {
-        for (_, s, last) in every(block, prev, stride) {
-            let Some(y) = gate.pass(s, last) else {
-                continue;
-            };
-            for (a, (b, v)) in bins.iter().zip(votes.iter_mut()).enumerate() {
-                let k = h.counter_of(a, y[a]);
-                for (&bin, (value, count)) in b.iter().zip(v.iter_mut()) {
-                    if bin == 0 || k != bin {
-                        continue;
-                    }
-                    if *count == 0 {
-                        (*value, *count) = (y[a], 1);
-                    } else if *value == y[a] {
-                        *count += 1;
-                    } else {
-                        *count -= 1;
-                    }
-                }
-            }
-        }
-    }
-    // The candidates; `confirm_levels` counts them on every row.
-    for ((b, v), l) in bins.iter().zip(&votes).zip(levels.iter_mut()) {
-        for ((&bin, &(value, count)), level) in b.iter().zip(v).zip(l.iter_mut()) {
-            if bin != 0 && count > 0 {
-                *level = value;
-            }
-        }
-    }
-    1
-}
-
 /// Keeps the candidate clip levels (`levels`, `T::MAX` for none) that
-/// at least [`crate::steps::rules::CLIP_SHARE`] of the `used` rows `gate`
-/// passes (and [`crate::steps::rules::CLIP_MIN_ROWS`]) share exactly, but not
+/// at least `CLIP_SHARE` of the `used` rows `gate`
+/// passes (and `CLIP_MIN_ROWS`) share exactly, but not
 /// most of them: one pass over every row, only when there is a
 /// candidate. Returns the passes taken. The candidates come from a
 /// subsample, whose counts are too few to decide: on a real recording
@@ -774,8 +614,8 @@ fn confirm_levels<T: Real, S: Sample>(
 }
 
 /// The rows a clip level needs of `rows` rows:
-/// [`crate::steps::rules::CLIP_SHARE`] of them, and at least
-/// [`crate::steps::rules::CLIP_MIN_ROWS`] (in integers: no soft-float `f64` on
+/// `CLIP_SHARE` of them, and at least
+/// `CLIP_MIN_ROWS` (in integers: no soft-float `f64` on
 /// the target).
 fn clip_rows(rows: usize) -> usize {
     const PER_ROW: usize = (1.0 / CLIP_SHARE) as usize;
@@ -866,40 +706,6 @@ fn shell_residuals<T: Real, S: Sample>(
 mod tests {
     use super::*;
     use crate::steps::normalize::scan;
-
-    /// A sphere of 1000 integer rows, and every other row beyond `x = 470`
-    /// (320 counts from the centre; a tenth of the rows lie beyond) clipped
-    /// to it: a level inside the axis's range, found by the screening's
-    /// interior search and dropped; the rows left beyond it are kept.
-    #[test]
-    fn a_clip_level_inside_the_range_is_found() {
-        let mut rows: [[i16; 3]; 1000] = core::array::from_fn(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / 1000.0;
-            let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963);
-            let v = [r * phi.cos(), r * phi.sin(), z].map(|c| (400.0 * c).round() as i16);
-            [v[0] + 150, v[1] - 80, v[2] + 20]
-        });
-        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let clean = screen(&rows, &s).unwrap();
-        assert_eq!(clean.drops.clipped, 0);
-        let mut clipped = 0;
-        let mut beyond = 0;
-        for row in rows.iter_mut().filter(|r| r[0] > 470) {
-            beyond += 1;
-            if beyond % 2 == 0 {
-                row[0] = 470;
-                clipped += 1;
-            }
-        }
-        assert!(clipped > 40, "{clipped}");
-        let s = scan::<f32, [i16; 3]>(&rows, true).unwrap();
-        let dirty = screen(&rows, &s).unwrap();
-        assert_eq!(dirty.rules.clip[0][1], 470.0);
-        // The clipped rows, and the clean rows that were at 470 already.
-        let at = rows.iter().filter(|r| r[0] == 470).count();
-        assert_eq!(dirty.drops.clipped, at);
-        assert!(at >= clipped && at < clipped + 5, "{at} {clipped}");
-    }
 
     /// The plain path is skipped when an axis's extreme may be a clip
     /// level: 2 % of the rows of a sphere of 1000 clipped to the level that

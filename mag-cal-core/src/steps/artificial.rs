@@ -682,8 +682,11 @@ mod tests {
         assert!(clean.skewness.abs() < 0.3, "{clean:?}");
         // Every tenth row 0.3 outside: heavy tails, and all on one side.
         let dirty = kurtosis(200, &mut samples);
-        assert!(dirty.kurtosis > crate::CLEAN_KURTOSIS + 3.0, "{dirty:?}");
-        assert!(dirty.skewness > crate::CLEAN_SKEWNESS, "{dirty:?}");
+        assert!(
+            dirty.kurtosis > crate::tuning::CLEAN_KURTOSIS + 3.0,
+            "{dirty:?}"
+        );
+        assert!(dirty.skewness > crate::tuning::CLEAN_SKEWNESS, "{dirty:?}");
     }
 
     /// The pass fed in slices is the pass run whole: bit for bit when the

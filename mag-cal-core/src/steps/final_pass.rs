@@ -3,6 +3,7 @@
 //! lack of fit over direction cells) and the calibrated directions'
 //! coverage.
 
+use crate::tuning::{LOF_CELLS, LOF_MIN_ROWS, LOF_SIGNIFICANCE};
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
@@ -65,16 +66,6 @@ impl<T: Real> From<&Stats<T>> for DirectionSums<T> {
     }
 }
 
-/// Direction cells of the lack-of-fit figure: the 6 faces of the cube
-/// around the unit sphere, each cut in 4 by the signs of the two other
-/// components.
-pub const LOF_CELLS: usize = 24;
-/// Cells with fewer rows than this do not enter the lack-of-fit figure.
-pub const LOF_MIN_ROWS: u32 = 5;
-/// The cell means are significantly off zero when `sum_c n_c m_c^2 /
-/// sigma^2 / cells` (about 1 for noise) exceeds this.
-pub const LOF_SIGNIFICANCE: f64 = 3.0;
-
 /// Per-cell sums of the radial residual of the rows used.
 type Cells<T> = [(T, u32); LOF_CELLS];
 
@@ -94,11 +85,11 @@ fn cell<T: Real>([x, y, z]: [T; 3]) -> usize {
 }
 
 /// The lack of fit and whether it is significant, from the cells with at
-/// least [`LOF_MIN_ROWS`] rows: with `m_c` a cell's mean radial residual and
+/// least `LOF_MIN_ROWS` rows: with `m_c` a cell's mean radial residual and
 /// `n_c` its rows, the systematic misfit
 /// `sqrt(max(0, mean_c(m_c^2 - sigma^2 / n_c)))` (the noise's share of each
 /// squared mean removed), in units of the field; significant when
-/// `mean_c(n_c m_c^2) / sigma^2` exceeds [`LOF_SIGNIFICANCE`] (noise alone
+/// `mean_c(n_c m_c^2) / sigma^2` exceeds `LOF_SIGNIFICANCE` (noise alone
 /// gives about 1).
 ///
 /// With `centred`, `m_c` is taken about the mean radial residual of those

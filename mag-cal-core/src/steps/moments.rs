@@ -204,21 +204,6 @@ impl<T: Real> Moments<T> {
         self.sums[0].to_count()
     }
 
-    /// `n sum|x|^4 / (sum|x|^2)^2`: 1 for samples on a sphere about the
-    /// origin, large when a few samples lie far out.
-    pub fn kurtosis(&self) -> T {
-        let two = T::lit(2.0);
-        let m2 = self.get(2, 0, 0) + self.get(0, 2, 0) + self.get(0, 0, 2);
-        let m4 = self.get(4, 0, 0)
-            + self.get(0, 4, 0)
-            + self.get(0, 0, 4)
-            + two * (self.get(2, 2, 0) + self.get(2, 0, 2) + self.get(0, 2, 2));
-        if !(m2 > T::zero()) {
-            return T::zero();
-        }
-        self.get(0, 0, 0) * m4 / (m2 * m2)
-    }
-
     /// `sum x^p y^q z^r`.
     #[inline]
     pub fn get(&self, p: u8, q: u8, r: u8) -> T {

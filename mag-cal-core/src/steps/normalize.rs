@@ -58,13 +58,6 @@ pub(crate) struct Scan<T: Real> {
     pub rules: Rules<T>,
 }
 
-/// The kurtosis `n sum|x|^4 / (sum|x|^2)^2` of the normalised samples above
-/// which the plain fit is not tried (gross outliers): 1 for a sphere, at
-/// most about 1.8 for an ellipsoid of axis ratio 4 (the largest distortion
-/// accepted), 1.7 for a Gaussian blob; one wild sample at `D` spreads among
-/// `n` adds about `D^4 / n`. It costs nothing: the LS moments hold it.
-pub(crate) const GROSS_KURTOSIS: f64 = 3.0;
-
 /// One pass over the samples: applies the drop rules (the glitch rules
 /// when `glitches` is set, see [`crate::steps::rules`]), counts, validates and
 /// normalises the rows kept.

@@ -13,7 +13,7 @@
 //! - repeats the previous row exactly (a stuck sensor, or a driver that
 //!   returned a stale register);
 //! - has a component at a clip level: the largest or smallest value of an
-//!   axis when at least [`CLIP_SHARE`] of the rows share it exactly (an
+//!   axis when at least `CLIP_SHARE` of the rows share it exactly (an
 //!   axis that saturated below the type's rails; noise makes an axis's
 //!   extreme a value few rows share), or a value inside the axis's range
 //!   that as many rows share exactly, on a side whose extreme is no clip
@@ -137,14 +137,6 @@ impl Rule {
 fn overflow_limit<T: Real>() -> T {
     T::MAX.sqrt() * T::lit(1.0 / 1_048_576.0)
 }
-
-/// Rows sharing an axis's extreme value are a clip level when they are at
-/// least this share of the rows (and at least [`CLIP_MIN_ROWS`]). One
-/// sixty-fourth: on a clean integer recording the extreme of an axis is
-/// shared by a few rows at most (a 50-count field, 1000 rows: about 5).
-pub const CLIP_SHARE: f64 = 1.0 / 64.0;
-/// See [`CLIP_SHARE`].
-pub const CLIP_MIN_ROWS: usize = 5;
 
 /// The glitch rules, as one pass applies them.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -86,17 +86,23 @@ fn weight<T: Real>(
             let m = Matrix3::from_fn(|i, j| T::from_double(c[i][j]));
             let finite = m.iter().all(|v| v.is_finite());
             if !finite || m != m.transpose() {
-                return Err(Error::InvalidNoiseCovariance);
+                return Err(Error::InvalidConfig {
+                    field: "noise_covariance",
+                });
             }
             m * (norm.inv_scale * norm.inv_scale)
         }
         None => stats.residual_covariance(),
     };
-    let l = cholesky(&columns_of(&sigma)).ok_or(Error::InvalidNoiseCovariance)?;
+    let l = cholesky(&columns_of(&sigma)).ok_or(Error::InvalidConfig {
+        field: "noise_covariance",
+    })?;
     let inv = from_columns(cholesky_inverse(&l));
     let (_, top) = min_max(&sym_eigenvalues(&columns_of(&inv))?);
     if !(top > T::zero()) || !top.is_finite() {
-        return Err(Error::InvalidNoiseCovariance);
+        return Err(Error::InvalidConfig {
+            field: "noise_covariance",
+        });
     }
     Ok(inv / top)
 }

@@ -10,7 +10,7 @@
 //! passes on a full sphere, 70-90 on a +-30 deg band), so the map
 //! `x -> ADC2 step`, with `x` the 6 upper entries of the symmetric `W'` and
 //! `b'` (normalised units), is accelerated by Anderson mixing with memory 5
-//! and mixing 1.8 ([`crate::numerics::quasi_newton::Anderson`], [`MIXING`]). It stops on the gauge-free change of
+//! and mixing 1.8 ([`crate::numerics::quasi_newton::Anderson`], `MIXING`). It stops on the gauge-free change of
 //! a plain step, `max|dM'| rho'^2 + max|db'| / rho' < tol` (`1e-6` in `f64`,
 //! `1e-5` in `f32`; [`crate::Config::pass_tolerance`]), and returns that
 //! step's image. Measured on the design document's scenarios A-G (50 runs
@@ -18,6 +18,7 @@
 //! for plain iteration to the same tolerance. The pass cap
 //! ([`crate::Config::max_passes`]) ends it with [`Warning::PassCap`].
 
+use crate::tuning::{MEMORY, MIXING};
 use nalgebra::{Matrix3, SVector, Vector3};
 
 use crate::numerics::linalg::{cholesky, cholesky_inverse, columns_of, from_columns, sym_inv_sqrt};
@@ -30,21 +31,6 @@ use crate::{Config, Error, Real, Warning, Warnings};
 
 /// Dimension of the fixed-point state: `W'` (6) and `b'` (3).
 const DIM: usize = 9;
-/// Anderson memory.
-pub const MEMORY: usize = 5;
-/// Anderson mixing `beta`: the step without history is `x + beta (g(x) - x)`.
-///
-/// The map's Jacobian at the fixed point, measured by finite differences,
-/// has eigenvalues 0.58-0.70 on a full sphere (scenarios A, B, E), 0.49-0.93
-/// on a +-30 deg band (D), and one 0. Plain steps (`beta = 1`) contract the
-/// cluster by only 0.6-0.7, and Anderson's first steps are plain steps (its
-/// first difference, from the LS fit to one-step ADC2, carries no useful
-/// secant). With `beta = 1.8` the mixing step contracts the cluster to
-/// 0.46 or less and the zero-eigenvalue direction by `|1 - beta| = 0.8`;
-/// any `beta < 2` keeps every eigenvalue in `[0, 1)` contracting.
-/// Median passes over scenarios A-G (50 runs each, f64), `beta` = 1 / 1.8:
-/// 6/7/7/11/9/7/11 and 5/7/7/10/8/7/9 (plain iteration: 15/21/68/83/24/20/77).
-pub const MIXING: f64 = 1.8;
 
 type State<T> = SVector<T, DIM>;
 

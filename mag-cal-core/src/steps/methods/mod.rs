@@ -1,6 +1,7 @@
 //! Step 4 of Algorithm 1: the re-estimation methods, each a small objective
 //! over the shared [`crate::numerics::quasi_newton`] solver.
 
+use crate::tuning::OUTLIER_CUT;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
@@ -73,7 +74,7 @@ impl Method {
     /// Whether the method fits the radial residual `|u| - 1` (ADC1, ADC2,
     /// iterated ADC2): its residuals then average to zero in every region
     /// of directions at a good fit, and the lack-of-fit figure judges it
-    /// ([`crate::judge::quality::REFUSE_LACK_OF_FIT`]).
+    /// (`REFUSE_LACK_OF_FIT`).
     pub const fn fits_radial_residual(self) -> bool {
         matches!(self, Method::Adc1 | Method::Adc2 | Method::Adc2Iterated)
     }
@@ -153,8 +154,8 @@ pub(crate) struct Weights<'r, T: Real> {
     /// A plain pass whose residuals' kurtosis exceeds the first, or whose
     /// skewness is below minus the second, ends the method before its
     /// solve ([`Estimate::beyond_tails_limit`]): the plain fit is not
-    /// clean, and the robust path follows (see [`crate::CLEAN_KURTOSIS`]
-    /// and [`crate::CLEAN_SKEWNESS`]).
+    /// clean, and the robust path follows (see `CLEAN_KURTOSIS`
+    /// and `CLEAN_SKEWNESS`).
     pub tails_limit: Option<(T, T)>,
 }
 
@@ -186,12 +187,6 @@ impl<T: Real> Weights<'_, T> {
         }
     }
 }
-
-/// Rows whose residual exceeds this many robust standard deviations get
-/// weight 0. Hard 0/1 weights: Tukey's smooth weights took 4 more passes
-/// for the same result; a 3-sigma cut cost 2-8 % of the clean accuracy,
-/// 3.5 sigma at most 2.2 % (measured in simulation).
-pub const OUTLIER_CUT: f64 = 3.5;
 
 /// What an artificial-data pass gives a method: the statistics, the
 /// robust sigma of the residuals and the largest residual.
