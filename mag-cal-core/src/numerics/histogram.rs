@@ -224,7 +224,7 @@ impl<T: Real> AxisHistograms<T> {
 
     #[inline(never)]
     fn halve(&mut self) {
-        for c in self.counts.iter_mut().flatten() {
+        for c in self.counts.as_flattened_mut() {
             *c /= 2;
         }
     }

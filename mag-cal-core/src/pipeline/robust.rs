@@ -46,9 +46,10 @@ pub(super) fn robust_path<T: Real, S: Sample>(
 
 /// The start of the robust LS ([`refit::window`]) whose fit scores best,
 /// if any fits; adds the passes the scoring took to `passes`. One screening
-/// for every start, held in this frame, which takes the place of the
-/// robust start's ([`start_from`] is inlined into the scorer): a result in
-/// doubt takes 4 068 B of stack (the footprint's `-doubtful` run; 4 092 B
+/// for every start, held in this frame, which [`robust_start`] is given
+/// in place of its own: a result in doubt takes 4 076 B of stack (the
+/// footprint's `-doubtful` run; 4 068 B with [`start_from`] inlined into
+/// the scorer as well, 248 bytes more flash; 4 092 B
 /// with the scoring inlined into [`robust_path`] and a screening for each
 /// start; 4 116 B with this function out of line and no screening in it),
 /// and `robust-patch-0.3` 7.38 M instructions instead of 8.26 M.
@@ -107,7 +108,16 @@ pub(super) fn robust_attempt<T: Real, S: Sample>(
     // The spans beside runs of rejected rows, which the weights refer to.
     let mut runs = runs::Runs::NONE;
     *outcome = Attempt::default();
-    let mut start = robust_start(samples, config, scan, ls_solve, &mut figures, &mut runs, k)?;
+    let mut start = robust_start(
+        samples,
+        config,
+        scan,
+        None,
+        ls_solve,
+        &mut figures,
+        &mut runs,
+        k,
+    )?;
     start.robust_passes = start.robust_passes.saturating_add(before);
     outcome.passes = start.robust_passes;
     let fit = robust_rest(samples, config, &start, step, &mut figures);
@@ -124,10 +134,11 @@ pub(super) fn robust_attempt<T: Real, S: Sample>(
 /// The score of the robust LS from start `k` (`None` when it fails) and
 /// the passes it took: the median residual ([`refit::score`]), divided by
 /// `AMBIGUOUS_SCORE` when the fit leaves out more than
-/// [`Thresholds::refuse_outlier_share`](crate::Thresholds::refuse_outlier_share) of the rows. Out of line, as
-/// [`robust_attempt`] (the discount inside the scoring loop took 32 bytes
-/// of the robust path's frame, on every contaminated calibration).
-#[inline(never)]
+/// [`Thresholds::refuse_outlier_share`](crate::Thresholds::refuse_outlier_share) of the rows. Inlined into
+/// [`best_start`] (itself out of line, so the robust path's frame does not
+/// hold the scoring loop): out of line, its frame sat between
+/// [`best_start`]'s and [`robust_start`]'s, 128 bytes more stack.
+#[inline(always)]
 pub(super) fn robust_score<T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
@@ -138,11 +149,11 @@ pub(super) fn robust_score<T: Real, S: Sample>(
 ) -> (Option<T>, u32) {
     let mut figures = Figures::new(scan, config, true);
     let mut runs = runs::Runs::NONE;
-    let Ok(start) = start_from(
+    let Ok(start) = robust_start(
         samples,
         config,
-        screening,
-        0,
+        scan,
+        Some(screening),
         ls_solve,
         &mut figures,
         &mut runs,
@@ -195,32 +206,43 @@ pub(super) fn finish_fit<T: Real, S: Sample>(
     finish(samples, config, start, est, figures).map(|done| done.fit)
 }
 
-/// The robust path up to the method: the screening and the robust LS fit,
-/// and the figures they give (into `figures`). Out of line: their moments and fits take
-/// stack only until the method starts.
+/// The robust path up to the method: the screening (or the one made
+/// before, `screened`) and the robust LS fit, and the figures they give
+/// (into `figures`). Out of line: their moments and fits take stack only
+/// until the method starts. The scoring of the starts calls it with the
+/// screening it made before: a copy of [`start_from`] inlined there too
+/// took 248 bytes of flash more (LS9 + ADC2).
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 pub(super) fn robust_start<'r, T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
     scan: &normalize::Scan<T>,
+    screened: Option<&screen::Screening<T>>,
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
     runs: &'r mut runs::Runs,
     k: usize,
 ) -> Result<Start<'r, T>, Error> {
-    let screening = match screen::screen(samples, scan) {
-        Ok(s) => s,
-        Err(screen::Unscreened::AllEqual) => return Err(Error::AllSamplesEqual),
-        Err(screen::Unscreened::Crowded) => {
-            // No sphere at all: judged by the crude sphere's fit error,
-            // infinite, which the judging always refuses.
-            figures.fit_error = Some(T::lit(f64::INFINITY));
-            return Err(judge_failure(figures, config, Error::AllSamplesEqual));
+    let own;
+    let (screening, passes) = match screened {
+        Some(s) => (s, 0),
+        None => {
+            own = match screen::screen(samples, scan) {
+                Ok(s) => s,
+                Err(screen::Unscreened::AllEqual) => return Err(Error::AllSamplesEqual),
+                Err(screen::Unscreened::Crowded) => {
+                    // No sphere at all: judged by the crude sphere's fit
+                    // error, infinite, which the judging always refuses.
+                    figures.fit_error = Some(T::lit(f64::INFINITY));
+                    return Err(judge_failure(figures, config, Error::AllSamplesEqual));
+                }
+            };
+            (&own, own.passes)
         }
     };
-    let passes = screening.passes;
     start_from(
-        samples, config, &screening, passes, ls_solve, figures, runs, k,
+        samples, config, screening, passes, ls_solve, figures, runs, k,
     )
 }
 
@@ -246,11 +268,18 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
         rules: screening.rules,
         screen: Some(screening.ball),
     };
-    let crude = refit::crude_moments(samples, screening, &gate, window);
-    figures.flatness = Some(quality::flatness(&crude, crude.count())?);
-    let fitted = match refit::robust_ls(samples, screening, &gate, &crude, ls_solve, runs, window) {
+    let fitted = match refit::robust_ls(
+        samples,
+        screening,
+        &gate,
+        ls_solve,
+        runs,
+        window,
+        &mut figures.flatness,
+    ) {
         Ok(f) => f,
-        Err(e) => {
+        Err(refit::Failure::Flat(e)) => return Err(e),
+        Err(refit::Failure::Fit(e)) => {
             // No ellipsoid at all: judged by the crude sphere's fit error.
             figures.fit_error = Some(screening.sphere_error);
             return Err(judge_failure(figures, config, e));

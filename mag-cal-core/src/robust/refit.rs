@@ -261,27 +261,41 @@ fn crude_cut<T: Real>(screening: &Screening<T>) -> Cut<T> {
     }
 }
 
-/// The robust LS fit from the crude start's moments `crude` (one pass
-/// already made), over the rows `gate` passes; writes into `runs` the
+/// Why [`robust_ls`] found no fit.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Failure {
+    /// The crude start's rows are flat ([`crate::judge::quality::flatness`]).
+    Flat(Error),
+    /// No ellipsoid from the crude start.
+    Fit(Error),
+}
+
+/// The robust LS fit from the crude start ([`crude_moments`], one pass,
+/// whose flatness goes into `flatness`), over the rows `gate` passes;
+/// writes into `runs` the
 /// spans beside runs of rejected rows ([`crate::robust::runs`]), which the later
 /// refits skip, as the method's passes will. The refits on the subsample
 /// skip the rows of `window` too, as the crude start did
 /// ([`window`]); those on every row take in the window's rows that fit.
 /// Out of line: its histogram and scatter take stack only while it runs,
-/// not during the method's passes.
+/// not during the method's passes. The crude start's moments are its
+/// own: made by the caller, they took 140 bytes of the caller's frame,
+/// under this one's.
 #[inline(never)]
 pub(crate) fn robust_ls<T: Real, S: Sample>(
     samples: &[S],
     screening: &Screening<T>,
     gate: &Gate<T>,
-    crude: &Moments<T>,
     solve: Solve<T>,
     runs: &mut Runs,
     window: &Runs,
-) -> Result<RobustLs<T>, Error> {
-    let mut moments = *crude;
+    flatness: &mut Option<T>,
+) -> Result<RobustLs<T>, Failure> {
+    let mut moments = crude_moments(samples, screening, gate, window);
+    *flatness =
+        Some(crate::judge::quality::flatness(&moments, moments.count()).map_err(Failure::Flat)?);
     let mut passes = 1;
-    let mut ls = fit_moments(&moments, solve)?;
+    let mut ls = fit_moments(&moments, solve).map_err(Failure::Fit)?;
     let mut sigma = screening.sphere_error;
     let mut found = false;
     // The crude start's pass measured no residuals: no trimming yet.

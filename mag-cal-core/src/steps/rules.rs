@@ -170,7 +170,7 @@ impl<T: Real> Rules<T> {
         Self {
             glitches: true,
             clip,
-            clipping: clip.iter().flatten().any(|l| l.abs() < T::MAX),
+            clipping: clip.as_flattened().iter().any(|l| l.abs() < T::MAX),
         }
     }
 
@@ -273,15 +273,6 @@ impl<T: Real> Gate<T> {
     /// data take the plain loops, [`Finite`], and do not pay it).
     #[inline(never)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
-        self.pass_inlined(sample, prev)
-    }
-
-    /// [`Gate::pass`] inlined into its caller: for a loop that runs at the
-    /// deepest stack, where the call's frame (32 bytes, and 16 for the
-    /// result) would add to the stack's high-water mark (the method's
-    /// artificial-data pass under the robust path's weights).
-    #[inline(always)]
-    pub(crate) fn pass_inlined<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
         let y = check::<T, S>(sample, prev, &self.rules).ok()?;
         match &self.screen {
             Some(ball) if !ball.contains(y) => None,
@@ -311,12 +302,6 @@ impl<T: Real> Gate<T> {
 /// (no rule, no screening, no row before to track: 20-40 instructions a
 /// sample less on a Cortex-M4F in each pass).
 pub(crate) trait Filter<T: Real> {
-    /// A gated pass (rules to apply, or the robust path's screening): the
-    /// final pass also sums the cubes of the residuals, which only the
-    /// robust path reports ([`crate::judge::quality::Quality::skewness`]); the
-    /// loop over every finite row of clean data does not pay for them.
-    const ROBUST: bool = false;
-
     /// The rows of `block` the filter passes; `prev` is the row before the
     /// block in the whole slice.
     fn rows<'a, S: Sample>(
@@ -344,8 +329,6 @@ impl<T: Real> Filter<T> for Finite {
 }
 
 impl<T: Real> Filter<T> for Gate<T> {
-    const ROBUST: bool = true;
-
     #[inline(always)]
     fn rows<'a, S: Sample>(
         &'a self,
