@@ -9,8 +9,10 @@
 //! [`Config::validate`](crate::Config::validate); the rest is fixed. The
 //! robust path's mechanisms and what each buys are in `docs/robustness.md`,
 //! section 5 (`cargo xtask ablation`). The background calibrator's own
-//! constants (`background::RECENT`, `MIN_SIGMA`, `ADOPT_RATIO`, ...) are
-//! still in `device/background.rs`.
+//! constants are still in `device/background.rs` (`background::RECENT`,
+//! `MIN_SIGMA`, ...) and, for its decisions, `judge/background.rs`
+//! (`ADOPT_RATIO`, `ADOPT_COVERAGE`, `OFFSETS_ERROR_RATIO`,
+//! `OFFSETS_MAX_FIT_ERROR`).
 
 // Without outlier handling (feature `robust` off) the robust path's
 // constants are not read.

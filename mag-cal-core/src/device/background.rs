@@ -58,18 +58,19 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::device::collector;
 use crate::device::offsets::{refit_offsets, Strength};
-use crate::judge::quality::{self, Figures};
+use crate::judge::background::{self, LsFigures};
+use crate::judge::quality;
 use crate::numerics::linalg::{dot, larger, sym_inv_sqrt};
 use crate::numerics::sphere::CentreFit;
 use crate::robust::runs::Runs;
 use crate::sample::Sample;
-use crate::steps::artificial::{Pass, PassSums, Residuals};
+use crate::steps::artificial::AdcPass;
 use crate::steps::ellipsoid::{self, Ellipsoid};
-use crate::steps::final_pass::{DirectionSums, FinalPass, FinalSums};
-use crate::steps::methods::{adc2, robust_sigma};
-use crate::steps::moments::{Cut, Moments};
+use crate::steps::final_pass::{DirectionSums, FinalSums};
+use crate::steps::methods::adc2;
+use crate::steps::moments::{Cut, Moments, MomentsPass};
 use crate::steps::normalize::{Normalization, Projector, MIN_SAMPLES};
-use crate::steps::rules::{check, Drops, Gate, Rules};
+use crate::steps::rules::{check, Gate, Rules};
 use crate::{Calibration, Error, Quality, Real, Thresholds, Warnings};
 
 /// Direction cells of the buffer (those of [`crate::device::collector`]).
@@ -83,33 +84,9 @@ pub const RECENT: usize = 64;
 /// every reading of a noisier day an outlier.
 pub const MIN_SIGMA: f64 = 0.005;
 
-/// An offsets-only fit is adopted when its fit error is at most this many
-/// times the current calibration's (or [`OFFSETS_MAX_FIT_ERROR`], the
-/// larger).
-pub const OFFSETS_ERROR_RATIO: f64 = 2.0;
-
-/// See [`OFFSETS_ERROR_RATIO`].
-pub const OFFSETS_MAX_FIT_ERROR: f64 = 0.03;
-
-/// A refit replaces the calibration in use only when its robust fit error
-/// on the buffer is below this share of the calibration in use's: a
-/// margin over the noise of the figure, so that equally good fits do not
-/// replace each other (each new fit, fitted to the buffer, fits it a
-/// little better, if only by following its noise).
-pub const ADOPT_RATIO: f64 = 0.9;
-
-/// Nor when its coverage (`lambda_min` of the directions' covariance) is
-/// below this share of the calibration in use's. (Taking a fit below 0.75
-/// of the fit error whatever its coverage was measured and not taken: it
-/// doubled the median recovery after a hard-iron jump.)
-pub const ADOPT_COVERAGE: f64 = 0.9;
-
-// Measured and not taken (20 runs of each kind, `background-table`):
-// comparing the RMS over each fit's inliers instead of the robust fit
-// error (one false adoption during a magnet's pass, the median recovery
-// after a jump unchanged but its worst 3x longer), and clearing the
-// coverage of a calibration whose offsets were re-estimated (drift end
-// error 0.063 -> 0.073).
+pub use crate::judge::background::{
+    ADOPT_COVERAGE, ADOPT_RATIO, OFFSETS_ERROR_RATIO, OFFSETS_MAX_FIT_ERROR,
+};
 
 /// Readings farther than this many field strengths from the calibrated
 /// unit sphere are not buffered (wild readings).
@@ -269,50 +246,16 @@ struct Estimate<T: Real> {
 #[allow(clippy::large_enum_variant)]
 enum Stage<T: Real> {
     Idle,
-    /// Residuals under the prior.
+    /// The residuals under the prior: its robust fit error on the buffer,
+    /// which sets the cut of the refit's moments and which the refit must
+    /// beat.
     Prior {
         prior: Prior<T>,
         pos: usize,
         sums: FinalSums<T>,
     },
-    /// LS9 moments of the rows within the prior's cut.
-    Moments {
-        prior: Prior<T>,
-        current_error: T,
-        pos: usize,
-        moments: Moments<T>,
-        limit: T,
-    },
-    /// The LS solve.
-    Solve {
-        prior: Prior<T>,
-        current_error: T,
-        moments: Moments<T>,
-        limit: T,
-    },
-    /// An artificial-data pass from `start`.
-    Adc {
-        prior: Prior<T>,
-        current_error: T,
-        figures: Partial<T>,
-        round: u8,
-        start: Estimate<T>,
-        limit: T,
-        pos: usize,
-        sums: PassSums<T>,
-        residuals: Residuals<T>,
-    },
-    /// The final pass under the estimate.
-    Final {
-        prior: Prior<T>,
-        current_error: T,
-        figures: Partial<T>,
-        est: Estimate<T>,
-        directions: DirectionSums<T>,
-        limit: T,
-        pos: usize,
-        sums: FinalSums<T>,
-    },
+    /// The refit proper.
+    Refit(Refit<T>),
     /// Dropping the samples older than [`BackgroundConfig::max_age`], then
     /// the refit.
     Age {
@@ -326,11 +269,41 @@ enum Stage<T: Real> {
     },
 }
 
-/// The figures of the LS step, carried to the judging.
-#[derive(Clone, Copy, Debug)]
-struct Partial<T: Real> {
-    flatness: T,
-    quadric_gap: Option<T>,
+/// A refit under way: its start, the calibration in use's fit error on
+/// the buffer, and the pass under way (the steps of the batch fit's robust
+/// ADC2, each fed the buffer one slice a call).
+struct Refit<T: Real> {
+    prior: Prior<T>,
+    /// The robust fit error on the buffer under the prior.
+    current_error: T,
+    /// Where the next slice of the buffer starts.
+    pos: usize,
+    pass: RefitPass<T>,
+}
+
+/// The passes of a refit, in order.
+#[allow(clippy::large_enum_variant)]
+enum RefitPass<T: Real> {
+    /// LS9 moments of the rows within the prior's cut.
+    Moments(MomentsPass<T>),
+    /// The LS solve (no rows: one call).
+    Solve(Moments<T>),
+    /// An artificial-data pass from `start` (`round` 0 from the LS fit, 1
+    /// from round 0's estimate), then its solve; the figures so far.
+    Adc {
+        ls: LsFigures<T>,
+        round: u8,
+        start: Estimate<T>,
+        pass: AdcPass<T>,
+    },
+    /// The final pass under the estimate, then the judging.
+    Final {
+        ls: LsFigures<T>,
+        est: Estimate<T>,
+        directions: DirectionSums<T>,
+        limit: T,
+        sums: FinalSums<T>,
+    },
 }
 
 /// The stale watch.
@@ -591,6 +564,12 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
             return Stepped::Idle;
         }
+        if matches!(self.stage, Stage::Refit(_)) {
+            // In place: a refit's state is the largest stage (about 1 KB),
+            // and moving it in and out took a tenth of a refit's
+            // instructions on a Cortex-M4F.
+            return self.refit();
+        }
         let stage = core::mem::replace(&mut self.stage, Stage::Idle);
         let (next, result) = self.advance(stage);
         self.stage = next;
@@ -807,7 +786,6 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
 
     /// One slice of `stage`; the stage after it and what to report.
     fn advance(&mut self, stage: Stage<T>) -> (Stage<T>, Stepped) {
-        let plain = Gate::PLAIN;
         match stage {
             Stage::Idle => (Stage::Idle, Stepped::Idle),
             Stage::Prior {
@@ -817,240 +795,32 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             } => {
                 let (rows, end) = self.slice(pos);
                 let map = Projector::new(&prior.norm, &Vector3::zeros(), &prior.w);
-                sums.add(rows, &map, &plain, &Runs::NONE, None, true);
+                sums.add(rows, &map, &Gate::PLAIN, &Runs::NONE, None, true);
                 if end < self.store.len() {
-                    return (
-                        Stage::Prior {
-                            prior,
-                            pos: end,
-                            sums,
-                        },
-                        Stepped::Working,
-                    );
+                    let stage = Stage::Prior {
+                        prior,
+                        pos: end,
+                        sums,
+                    };
+                    return (stage, Stepped::Working);
                 }
                 match sums.finish(None) {
                     Ok(pass) => {
                         let limit = cut(pass.fit_error);
-                        let stage = Stage::Moments {
+                        let moments = MomentsPass::new(prior.norm, Some(Cut { map, limit }));
+                        let refit = Refit {
                             prior,
                             current_error: pass.fit_error,
                             pos: 0,
-                            moments: Moments::zero(),
-                            limit,
+                            pass: RefitPass::Moments(moments),
                         };
-                        (stage, Stepped::Working)
+                        (Stage::Refit(refit), Stepped::Working)
                     }
                     Err(e) => self.refused(e),
                 }
             }
-            Stage::Moments {
-                prior,
-                current_error,
-                pos,
-                mut moments,
-                limit,
-            } => {
-                let (rows, end) = self.slice(pos);
-                let c = Cut {
-                    map: Projector::new(&prior.norm, &Vector3::zeros(), &prior.w),
-                    limit,
-                };
-                moments.add(&Moments::accumulate_with(
-                    rows,
-                    &prior.norm,
-                    &plain,
-                    Some(&c),
-                    None,
-                ));
-                let stage = if end < self.store.len() {
-                    Stage::Moments {
-                        prior,
-                        current_error,
-                        pos: end,
-                        moments,
-                        limit,
-                    }
-                } else {
-                    Stage::Solve {
-                        prior,
-                        current_error,
-                        moments,
-                        limit,
-                    }
-                };
-                (stage, Stepped::Working)
-            }
-            Stage::Solve {
-                prior,
-                current_error,
-                moments,
-                limit,
-            } => {
-                let count = moments.count();
-                let flatness = match quality::flatness(&moments, count) {
-                    Ok(f) => f,
-                    Err(e) => return self.refused(e),
-                };
-                let (ls, quadric_gap) = crate::pipeline::ls_step(&moments, ellipsoid::ls9);
-                let ls: Ellipsoid<T> = match ls {
-                    Ok(ls) => ls,
-                    Err(e) => {
-                        // Planar data fail the LS fit: say so.
-                        let mut figures = Figures::before_fit(
-                            self.store.len(),
-                            Drops::default(),
-                            true,
-                            true,
-                            false,
-                        );
-                        figures.flatness = Some(flatness);
-                        let th = &self.config.thresholds;
-                        return self.refused(quality::judge_failure(&figures, th, e));
-                    }
-                };
-                let stage = Stage::Adc {
-                    prior,
-                    current_error,
-                    figures: Partial {
-                        flatness,
-                        quadric_gap,
-                    },
-                    round: 0,
-                    start: Estimate {
-                        centre: ls.centre,
-                        w: ls.w,
-                        t: ls.t,
-                    },
-                    limit,
-                    pos: 0,
-                    sums: PassSums::new(),
-                    residuals: Residuals::new(),
-                };
-                (stage, Stepped::Working)
-            }
-            Stage::Adc {
-                prior,
-                current_error,
-                figures,
-                round,
-                start,
-                limit,
-                pos,
-                mut sums,
-                mut residuals,
-            } => {
-                let (rows, end) = self.slice(pos);
-                let map = Projector::new(&prior.norm, &start.centre, &start.w);
-                let pass = Pass {
-                    gate: &plain,
-                    runs: &Runs::NONE,
-                    limit: Some(limit),
-                };
-                sums.add(rows, &map, &pass, &mut residuals);
-                if end < self.store.len() {
-                    let stage = Stage::Adc {
-                        prior,
-                        current_error,
-                        figures,
-                        round,
-                        start,
-                        limit,
-                        pos: end,
-                        sums,
-                        residuals,
-                    };
-                    return (stage, Stepped::Working);
-                }
-                let solved = sums.stats(&start.w).and_then(|stats| {
-                    let sol = adc2::solve_closed_form(&stats, &start.t, &start.centre)?;
-                    let w = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
-                    Ok((stats, sol, w))
-                });
-                let (stats, sol, w) = match solved {
-                    Ok(s) => s,
-                    Err(e) => return self.refused(e),
-                };
-                let est = Estimate {
-                    centre: sol.centre,
-                    w,
-                    t: sol.t,
-                };
-                let sigma = robust_sigma::<T>(&residuals.hist).unwrap_or(T::zero());
-                let stage = if round == 0 {
-                    Stage::Adc {
-                        prior,
-                        current_error,
-                        figures,
-                        round: 1,
-                        start: est,
-                        limit: cut(sigma),
-                        pos: 0,
-                        sums: PassSums::new(),
-                        residuals: Residuals::new(),
-                    }
-                } else {
-                    Stage::Final {
-                        prior,
-                        current_error,
-                        figures,
-                        est,
-                        directions: DirectionSums::from(&stats),
-                        limit: cut(sigma),
-                        pos: 0,
-                        sums: FinalSums::new(),
-                    }
-                };
-                (stage, Stepped::Working)
-            }
-            Stage::Final {
-                prior,
-                current_error,
-                figures,
-                est,
-                directions,
-                limit,
-                pos,
-                mut sums,
-            } => {
-                let (rows, end) = self.slice(pos);
-                let map = Projector::new(&prior.norm, &est.centre, &est.w);
-                sums.add(rows, &map, &plain, &Runs::NONE, Some(limit), false);
-                if end < self.store.len() {
-                    let stage = Stage::Final {
-                        prior,
-                        current_error,
-                        figures,
-                        est,
-                        directions,
-                        limit,
-                        pos: end,
-                        sums,
-                    };
-                    return (stage, Stepped::Working);
-                }
-                let result = sums
-                    .finish(Some(directions))
-                    .and_then(|last| self.judge(&prior, &figures, &est, &last));
-                self.counters.refits += 1;
-                match result {
-                    Ok(current) => {
-                        let better = current.fit_error < current_error * T::lit(ADOPT_RATIO);
-                        // Nor when its directions cover much less than
-                        // those of the calibration in use: a fit of a
-                        // narrower buffer (after a purge) follows its noise.
-                        let covered = self.current.is_none_or(|c| {
-                            current.quality.coverage >= c.quality.coverage * T::lit(ADOPT_COVERAGE)
-                        });
-                        if self.current.is_some() && !(better && covered) {
-                            return (Stage::Idle, Stepped::Kept);
-                        }
-                        self.adopt(current, false);
-                        self.counters.adopted += 1;
-                        (Stage::Idle, Stepped::Adopted)
-                    }
-                    Err(e) => self.refused(e),
-                }
-            }
+            // Stepped in place (`Background::refit`).
+            stage @ Stage::Refit(_) => (stage, Stepped::Working),
             Stage::Age { mut pos } => {
                 let now = self.counters.readings as u32;
                 let max_age = self.config.max_age;
@@ -1092,6 +862,98 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         }
     }
 
+    /// One slice of the refit's pass (or its one solve), in place; at the
+    /// end of a pass, what it gives and the next pass, or the refit's end.
+    fn refit(&mut self) -> Stepped {
+        let Stage::Refit(refit) = &mut self.stage else {
+            return Stepped::Idle;
+        };
+        let len = self.store.len();
+        let end = refit.pos.saturating_add(self.config.slice.max(1)).min(len);
+        let rows = self.store.get(refit.pos..end).unwrap_or(&[]);
+        let (plain, norm) = (Gate::PLAIN, &refit.prior.norm);
+        match &mut refit.pass {
+            RefitPass::Moments(pass) => pass.feed(rows, &plain),
+            RefitPass::Solve(_) => {}
+            RefitPass::Adc { pass, .. } => pass.feed(rows, &plain, &Runs::NONE),
+            RefitPass::Final {
+                est, limit, sums, ..
+            } => {
+                let map = Projector::new(norm, &est.centre, &est.w);
+                sums.add(rows, &map, &plain, &Runs::NONE, Some(*limit), false);
+            }
+        }
+        let sliced = !matches!(refit.pass, RefitPass::Solve(_));
+        if sliced && end < len {
+            refit.pos = end;
+            return Stepped::Working;
+        }
+        refit.pos = 0;
+        let th = &self.config.thresholds;
+        let next = match &refit.pass {
+            RefitPass::Moments(pass) => Ok(RefitPass::Solve(*pass.moments())),
+            RefitPass::Solve(moments) => ls_start(norm, refit.current_error, moments, len, th),
+            RefitPass::Adc {
+                ls,
+                round,
+                start,
+                pass,
+            } => adc_end(norm, *ls, *round, start, pass),
+            RefitPass::Final {
+                ls,
+                est,
+                directions,
+                sums,
+                ..
+            } => {
+                let result = sums.finish(Some(*directions)).and_then(|last| {
+                    let (warnings, quality) = background::judge_refit(ls, len, &est.w, &last, th)?;
+                    let calibration = Calibration::from_normalised_w(norm, &est.w, &est.centre)?;
+                    Ok(Current {
+                        calibration,
+                        quality,
+                        warnings,
+                        fit_error: last.fit_error,
+                        radial_rms: last.radial_rms,
+                    })
+                });
+                let current_error = refit.current_error;
+                self.counters.refits += 1;
+                let (stage, stepped) = match result {
+                    Ok(current) => self.conclude(current, current_error),
+                    Err(e) => self.refused(e),
+                };
+                self.stage = stage;
+                return stepped;
+            }
+        };
+        match next {
+            Ok(pass) => {
+                refit.pass = pass;
+                Stepped::Working
+            }
+            Err(e) => {
+                let (stage, stepped) = self.refused(e);
+                self.stage = stage;
+                stepped
+            }
+        }
+    }
+
+    /// The end of a refit that passed every check: `current` is adopted
+    /// when there is no calibration in use, or when it replaces the one in
+    /// use (whose fit error on the buffer is `current_error`), else kept.
+    fn conclude(&mut self, current: Current<T>, current_error: T) -> (Stage<T>, Stepped) {
+        let in_use = self.current.map(|c| c.quality.coverage);
+        let q = &current.quality;
+        if !background::replaces(current.fit_error, q.coverage, current_error, in_use) {
+            return (Stage::Idle, Stepped::Kept);
+        }
+        self.adopt(current, false);
+        self.counters.adopted += 1;
+        (Stage::Idle, Stepped::Adopted)
+    }
+
     /// The first stage of a refit.
     fn start_refit(&self) -> Stage<T> {
         Stage::Prior {
@@ -1099,49 +961,6 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             pos: 0,
             sums: FinalSums::new(),
         }
-    }
-
-    /// Figures to a calibration or a refusal (the core's judging).
-    fn judge(
-        &self,
-        prior: &Prior<T>,
-        partial: &Partial<T>,
-        est: &Estimate<T>,
-        last: &FinalPass<T>,
-    ) -> Result<Current<T>, Error> {
-        let distortion = quality::distortion(&est.w)?;
-        let mut figures =
-            Figures::before_fit(self.store.len(), Drops::default(), true, true, false);
-        figures.used = Some(last.used);
-        figures.flatness = Some(partial.flatness);
-        figures.quadric_gap = partial.quadric_gap;
-        figures.distortion = Some(distortion);
-        figures.coverage = Some(last.coverage);
-        figures.gram_condition = Some(last.gram_condition);
-        figures.radial_rms = Some(last.radial_rms);
-        figures.fit_error = Some(last.fit_error);
-        figures.lack_of_fit = Some(last.lack_of_fit);
-        figures.misfit_significant = last.misfit_significant;
-        let warnings = quality::judge(&figures, &self.config.thresholds)?;
-        let calibration = Calibration::from_normalised_w(&prior.norm, &est.w, &est.centre)?;
-        Ok(Current {
-            calibration,
-            quality: Quality {
-                flatness: partial.flatness,
-                quadric_gap: partial.quadric_gap.unwrap_or(T::zero()),
-                distortion,
-                coverage: last.coverage,
-                gram_condition: last.gram_condition,
-                fit_error: last.fit_error,
-                lack_of_fit: last.lack_of_fit,
-                outlier_share: figures.outlier_share().unwrap_or(T::zero()),
-                // Its passes take every row the store holds (no gate).
-                skewness: T::zero(),
-            },
-            warnings,
-            fit_error: last.fit_error,
-            radial_rms: last.radial_rms,
-        })
     }
 
     fn refused(&mut self, e: Error) -> (Stage<T>, Stepped) {
@@ -1174,20 +993,9 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         }
         self.last_offsets_try = self.counters.readings;
         let fit = refit_offsets(&self.recent, &current.calibration, Strength::Unchanged);
-        let limit = larger(
-            current.fit_error * T::lit(OFFSETS_ERROR_RATIO),
-            T::lit(OFFSETS_MAX_FIT_ERROR),
-        );
         let result = fit.and_then(|fit| {
-            let outliers = fit.rejected * 4 > fit.samples_used;
-            if fit.fit_error > limit || outliers {
-                Err(Error::NoSphere {
-                    fit_error: crate::Figure::new(fit.fit_error.to_single()),
-                    limit: crate::Figure::new(limit.to_single()),
-                })
-            } else {
-                Ok(fit)
-            }
+            background::judge_offsets(&fit, current.fit_error)?;
+            Ok(fit)
         });
         match result {
             Ok(fit) => {
@@ -1217,6 +1025,79 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             }
         }
     }
+}
+
+/// The LS step of a refit of `valid` buffered rows on the moments of the
+/// rows within the prior's cut: the first artificial-data pass from the LS
+/// fit, with the same cut (from `current_error`, the prior's fit error); a
+/// failed LS fit is judged on the flatness with the thresholds `th`
+/// (planar data fail it).
+fn ls_start<T: Real>(
+    norm: &Normalization<T>,
+    current_error: T,
+    moments: &Moments<T>,
+    valid: usize,
+    th: &Thresholds,
+) -> Result<RefitPass<T>, Error> {
+    let flatness = quality::flatness(moments, moments.count())?;
+    let (ls, quadric_gap) = crate::pipeline::ls_step(moments, ellipsoid::ls9);
+    let figures = LsFigures {
+        flatness,
+        quadric_gap: None,
+    };
+    // Planar data fail the LS fit: say so.
+    let ls: Ellipsoid<T> =
+        ls.map_err(|e| quality::judge_failure(&figures.figures(valid), th, e))?;
+    let limit = cut(current_error);
+    Ok(RefitPass::Adc {
+        ls: LsFigures {
+            flatness,
+            quadric_gap,
+        },
+        round: 0,
+        pass: AdcPass::new(norm, &ls.centre, &ls.w, Some(limit)),
+        start: Estimate {
+            centre: ls.centre,
+            w: ls.w,
+            t: ls.t,
+        },
+    })
+}
+
+/// The end of a refit's artificial-data pass from `start`: the ADC2
+/// solve in closed form; then the next round from its estimate, with the
+/// cut of this pass's residuals, or after round 1 the final pass under it.
+fn adc_end<T: Real>(
+    norm: &Normalization<T>,
+    ls: LsFigures<T>,
+    round: u8,
+    start: &Estimate<T>,
+    pass: &AdcPass<T>,
+) -> Result<RefitPass<T>, Error> {
+    let stats = pass.stats(&start.w)?;
+    let sol = adc2::solve_closed_form(&stats, &start.t, &start.centre)?;
+    let est = Estimate {
+        centre: sol.centre,
+        w: sym_inv_sqrt(&(sol.t * sol.t.transpose()))?,
+        t: sol.t,
+    };
+    let limit = cut(pass.sigma().unwrap_or(T::zero()));
+    Ok(if round == 0 {
+        RefitPass::Adc {
+            ls,
+            round: 1,
+            pass: AdcPass::new(norm, &est.centre, &est.w, Some(limit)),
+            start: est,
+        }
+    } else {
+        RefitPass::Final {
+            ls,
+            est,
+            directions: DirectionSums::from(&stats),
+            limit,
+            sums: FinalSums::new(),
+        }
+    })
 }
 
 /// The residual cut of a pass: [`OUTLIER_CUT`] robust standard deviations

@@ -60,6 +60,7 @@ use core::fmt;
 
 use crate::device::heading::{atan2_deg, wrap_deg};
 use crate::error::{Shown, Versus};
+use crate::judge::planar;
 use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, Mat};
 use crate::robust::screen::{screen, Unscreened};
@@ -155,17 +156,7 @@ impl core::error::Error for Error {
     }
 }
 
-/// Flatness above this: [`Error::NotPlanar`]. Measured on level turns
-/// (noise 1 % of the field): tilts of up to 10 deg give 0.004-0.02, the
-/// real recording `planar_243.txt` 0.010; a +-30 deg band gives 0.18 and
-/// the full sphere 0.3-1. Between `REFUSE_FLATNESS` and
-/// this, both the planar and the three-dimensional fit may run.
-pub const REFUSE_NOT_PLANAR: f64 = 0.06;
-
-/// Sectors of 30 deg of turn angle that must hold samples: fewer is
-/// [`Error::ShortArc`]. An ellipse from less than about 240 deg of arc is
-/// poorly determined (its centre slides along the missing side).
-pub const MIN_SECTORS: u8 = 8;
+pub use crate::judge::planar::{judge, PlanarThresholds, MIN_SECTORS, REFUSE_NOT_PLANAR};
 
 /// The sectors of turn angle counted by [`MIN_SECTORS`].
 pub const SECTORS: u8 = 12;
@@ -173,38 +164,6 @@ pub const SECTORS: u8 = 12;
 /// Artificial-data passes with the residual cut on data with outliers
 /// (step 4).
 const ROBUST_ROUNDS: u32 = 2;
-
-/// The limits [`judge`] applies.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub struct PlanarThresholds {
-    /// Flatness above this: [`Error::NotPlanar`].
-    pub refuse_not_planar: f32,
-    /// Fit error above this: [`Error::NoEllipse`].
-    pub refuse_fit_error: f32,
-    /// Fewer sectors than this: [`Error::ShortArc`].
-    pub min_sectors: u8,
-    /// Share of the rules' rows screened out or rejected above this:
-    /// [`crate::Error::TooManyOutliers`].
-    pub refuse_outlier_share: f32,
-}
-
-impl PlanarThresholds {
-    /// The measured constants of this module and of [`crate::judge::quality`].
-    pub const DEFAULT: Self = Self {
-        refuse_not_planar: REFUSE_NOT_PLANAR as f32,
-        refuse_fit_error: crate::tuning::REFUSE_FIT_ERROR as f32,
-        min_sectors: MIN_SECTORS,
-        refuse_outlier_share: crate::tuning::REFUSE_OUTLIER_SHARE as f32,
-    };
-}
-
-impl Default for PlanarThresholds {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
-}
 
 /// What to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -418,12 +377,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let screening = match screen(samples, &scanned) {
         Ok(s) => s,
         Err(Unscreened::AllEqual) => return Err(FitError::AllSamplesEqual.into()),
-        Err(Unscreened::Crowded) => {
-            return Err(Error::Fit(FitError::NoSphere {
-                fit_error: Figure::new(f32::INFINITY),
-                limit: Figure::new(config.thresholds.refuse_fit_error),
-            }))
-        }
+        Err(Unscreened::Crowded) => return Err(planar::crowded(&config.thresholds)),
     };
     let gate = Gate {
         rules: screening.rules,
@@ -444,6 +398,50 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     };
 
     // Step 2: the plane.
+    let (plane, flatness, axis_tilt_deg) = plane_of(&gated, config)?;
+    passes += 1;
+
+    // Steps 3 and 4: the ellipse in it, and the residual cut of its rows.
+    let ((w2, c2), cut) = ellipse_of(&gated, &plane, config, &mut passes)?;
+
+    // Step 5: the figures under the result.
+    let mut figures = FigureSums::new();
+    gated.each(|d| figures.add(&plane, &(w2, c2), cut, d));
+    passes += 1;
+    let valid = screening.valid;
+    let report = figures.report(
+        &w2,
+        screening.drops,
+        valid,
+        (flatness, axis_tilt_deg),
+        passes,
+    );
+    planar::judge(&report, valid, &config.thresholds)?;
+
+    // Back to sensor units: u = W2 P (y - centre) / m.
+    let Plane { mean, e1, e2, axis } = plane;
+    let mut centre = c;
+    let mut matrix = [[T::zero(); 3]; 2];
+    for i in 0..3 {
+        centre[i] += m * (mean[i] + c2[0] * e1[i] + c2[1] * e2[i]);
+        for (row, w) in matrix.iter_mut().zip(&w2) {
+            row[i] = (w[0] * e1[i] + w[1] * e2[i]) * inv_m;
+        }
+    }
+    let calibration = PlanarCalibration::new(axis, centre, matrix, T::zero())?;
+    Ok(PlanarFit {
+        calibration,
+        report,
+    })
+}
+
+/// Step 2, the plane of the rows: their mean and the eigenvectors of
+/// their covariance (the normal on the side of the caller's `up` axis),
+/// the flatness, and the angle between the normal and `up`, degrees.
+fn plane_of<T: Real, S: Sample>(
+    gated: &Rows<'_, T, S>,
+    config: &PlanarConfig,
+) -> Result<(Plane<T>, T, T), Error> {
     let (mut n, mut s1, mut s2) = (0usize, [T::zero(); 3], [[T::zero(); 3]; 3]);
     gated.each(|d| {
         n += 1;
@@ -454,7 +452,6 @@ pub fn calibrate_planar<T: Real, S: Sample>(
             }
         }
     });
-    passes += 1;
     if n < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             found: n,
@@ -493,19 +490,27 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     } else {
         T::zero()
     };
-    let plane = Plane { mean, e1, e2, axis };
+    Ok((Plane { mean, e1, e2, axis }, flatness, axis_tilt_deg))
+}
 
-    // Step 3: the conic of every row.
-    let (mut w2, mut c2) = conic_fit(&gated, &plane, None, config)?;
-    passes += 1;
-
-    // Step 4: artificial data. When the first pass's radial residuals show
-    // outliers, the conic is refitted without them, and the artificial-data
-    // pass repeated twice with the cut of the pass before.
+/// Steps 3 and 4, the ellipse of the rows in their plane: the conic of
+/// every row, then artificial data. When the first pass's radial residuals
+/// show outliers, the conic is refitted without them, and the
+/// artificial-data pass repeated twice with the cut of the pass before.
+/// The ellipse and the cut of its rows (`None`: every row); `passes`
+/// counts the passes made.
+fn ellipse_of<T: Real, S: Sample>(
+    gated: &Rows<'_, T, S>,
+    plane: &Plane<T>,
+    config: &PlanarConfig,
+    passes: &mut u32,
+) -> Result<(Ellipse<T>, Option<T>), Error> {
+    let (mut w2, mut c2) = conic_fit(gated, plane, None, config)?;
+    *passes += 1;
     let mut cut: Option<T> = None;
     for round in 0..=ROBUST_ROUNDS {
-        let adc = adc_pass(&gated, &plane, (w2, c2), cut)?;
-        passes += 1;
+        let adc = adc_pass(gated, plane, (w2, c2), cut)?;
+        *passes += 1;
         let outliers = adc
             .sigma
             .is_some_and(|s| adc.worst > s * T::lit(CLEAN_LIMIT));
@@ -517,125 +522,101 @@ pub fn calibrate_planar<T: Real, S: Sample>(
         if round == 0 {
             // The robust start: the conic of the rows within the cut of the
             // plain conic; its artificial data use the same cut.
-            (w2, c2) = conic_fit(&gated, &plane, limit.map(|l| (l, (w2, c2))), config)?;
-            passes += 1;
+            (w2, c2) = conic_fit(gated, plane, limit.map(|l| (l, (w2, c2))), config)?;
+            *passes += 1;
         } else {
             (w2, c2) = adc.estimate;
         }
         cut = limit;
     }
+    Ok(((w2, c2), cut))
+}
 
-    // Step 5: the figures under the result.
-    let mut hist = LogHistogram::new();
-    let mut sector_rows = [0u32; SECTORS as usize];
-    let (mut used, mut seen, mut out_of_plane) = (0usize, 0usize, T::zero());
-    gated.each(|d| {
+/// Step 5, the figures pass under the ellipse, as a value fed one row at a
+/// time ([`FigureSums::add`]): the radial residuals of every row, and of
+/// the rows within the cut their sectors of turn angle and their distance
+/// from the plane.
+struct FigureSums<T: Real> {
+    hist: LogHistogram,
+    sector_rows: [u32; SECTORS as usize],
+    /// Rows within the cut (with a direction).
+    used: usize,
+    /// Rows the gate passed.
+    seen: usize,
+    /// The sum of the squared distances of the rows used from the plane.
+    out_of_plane: T,
+}
+
+impl<T: Real> FigureSums<T> {
+    fn new() -> Self {
+        Self {
+            hist: LogHistogram::new(),
+            sector_rows: [0; SECTORS as usize],
+            used: 0,
+            seen: 0,
+            out_of_plane: T::zero(),
+        }
+    }
+
+    /// Adds the row `d` (normalised), under `ellipse` with the residual
+    /// `cut`.
+    #[inline(always)]
+    fn add(&mut self, plane: &Plane<T>, ellipse: &Ellipse<T>, cut: Option<T>, d: [T; 3]) {
         let (p, h) = plane.coordinates(d);
-        seen += 1;
-        let (e, u, r) = radial(&(w2, c2), p);
-        hist.add(e);
+        self.seen += 1;
+        let (e, u, r) = radial(ellipse, p);
+        self.hist.add(e);
         if cut.is_some_and(|limit| !(e <= limit)) || !(r > T::zero()) {
             return;
         }
-        used += 1;
-        out_of_plane += h * h;
+        self.used += 1;
+        self.out_of_plane += h * h;
         let angle = atan2_deg(u[1], u[0]) + T::lit(180.0);
         let k = (angle * T::lit(f64::from(SECTORS) / 360.0)).to_count();
-        if let Some(cell) = sector_rows.get_mut(k.min(SECTORS as usize - 1)) {
+        if let Some(cell) = self.sector_rows.get_mut(k.min(SECTORS as usize - 1)) {
             *cell = cell.saturating_add(1);
         }
-    });
-    passes += 1;
-    let fit_error = robust_sigma::<T>(&hist).unwrap_or(T::zero());
-    let sectors = sector_rows.iter().filter(|&&k| k >= 2).count() as u8;
-    // The in-plane field strength in `p` units: 1 / sqrt(det W2).
-    let det = w2[0][0] * w2[1][1] - w2[0][1] * w2[1][0];
-    let radius = if det > T::zero() {
-        T::one() / det.sqrt()
-    } else {
-        T::zero()
-    };
-    let thickness = if used > 0 && radius > T::zero() {
-        (out_of_plane / T::from_count(used)).sqrt() / radius
-    } else {
-        T::zero()
-    };
-    let valid = screening.valid;
-    let report = PlanarReport {
-        samples_used: used,
-        drops: screening.drops,
-        screened: valid.saturating_sub(seen),
-        rejected: seen - used,
-        flatness,
-        fit_error,
-        sectors,
-        thickness,
-        axis_tilt_deg,
-        passes,
-    };
-    judge(&report, valid, &config.thresholds)?;
+    }
 
-    // Back to sensor units: u = W2 P (y - centre) / m.
-    let mut centre = c;
-    let mut matrix = [[T::zero(); 3]; 2];
-    for i in 0..3 {
-        centre[i] += m * (mean[i] + c2[0] * e1[i] + c2[1] * e2[i]);
-        for (row, w) in matrix.iter_mut().zip(&w2) {
-            row[i] = (w[0] * e1[i] + w[1] * e2[i]) * inv_m;
+    /// The report of the rows added under the ellipse `W2` = `w2`: `drops`
+    /// and `valid` are the rules', `plane` the flatness and the axis's
+    /// tilt from `up` (step 2), `passes` every pass made.
+    fn report(
+        &self,
+        w2: &[[T; 2]; 2],
+        drops: Drops,
+        valid: usize,
+        (flatness, axis_tilt_deg): (T, T),
+        passes: u32,
+    ) -> PlanarReport<T> {
+        let fit_error = robust_sigma::<T>(&self.hist).unwrap_or(T::zero());
+        let sectors = self.sector_rows.iter().filter(|&&k| k >= 2).count() as u8;
+        // The in-plane field strength in `p` units: 1 / sqrt(det W2).
+        let det = w2[0][0] * w2[1][1] - w2[0][1] * w2[1][0];
+        let radius = if det > T::zero() {
+            T::one() / det.sqrt()
+        } else {
+            T::zero()
+        };
+        let used = self.used;
+        let thickness = if used > 0 && radius > T::zero() {
+            (self.out_of_plane / T::from_count(used)).sqrt() / radius
+        } else {
+            T::zero()
+        };
+        PlanarReport {
+            samples_used: used,
+            drops,
+            screened: valid.saturating_sub(self.seen),
+            rejected: self.seen - used,
+            flatness,
+            fit_error,
+            sectors,
+            thickness,
+            axis_tilt_deg,
+            passes,
         }
     }
-    let calibration = PlanarCalibration::new(axis, centre, matrix, T::zero())?;
-    Ok(PlanarFit {
-        calibration,
-        report,
-    })
-}
-
-/// Turns the figures into acceptance or a refusal: `valid` is the rows the
-/// rules kept.
-///
-/// # Errors
-/// In that order: too few samples ([`crate::Error::TooFewSamples`]),
-/// [`Error::NotPlanar`], [`Error::NoEllipse`], too many outliers
-/// ([`crate::Error::TooManyOutliers`]), [`Error::ShortArc`].
-pub fn judge<T: Real>(
-    report: &PlanarReport<T>,
-    valid: usize,
-    th: &PlanarThresholds,
-) -> Result<(), Error> {
-    if report.samples_used < MIN_SAMPLES {
-        return Err(Error::Fit(FitError::TooFewSamples {
-            found: report.samples_used,
-            required: MIN_SAMPLES,
-        }));
-    }
-    if !(report.flatness.to_single() <= th.refuse_not_planar) {
-        return Err(Error::NotPlanar {
-            flatness: Figure::new(report.flatness.to_single()),
-            limit: Figure::new(th.refuse_not_planar),
-        });
-    }
-    if !(report.fit_error.to_single() <= th.refuse_fit_error) {
-        return Err(Error::NoEllipse {
-            fit_error: Figure::new(report.fit_error.to_single()),
-            limit: Figure::new(th.refuse_fit_error),
-        });
-    }
-    let out = report.screened + report.rejected;
-    if valid > 0 && out as f32 > th.refuse_outlier_share * valid as f32 {
-        return Err(Error::Fit(FitError::TooManyOutliers {
-            rejected: out,
-            valid,
-            limit: Figure::new(th.refuse_outlier_share),
-        }));
-    }
-    if report.sectors < th.min_sectors {
-        return Err(Error::ShortArc {
-            sectors: report.sectors,
-            required: th.min_sectors,
-        });
-    }
-    Ok(())
 }
 
 /// Passes of the rules' scan (the drop count and the moments).
@@ -728,10 +709,7 @@ fn conic_fit<T: Real, S: Sample>(
     let phi = cholesky(&a5)
         .map(|l| cholesky_solve(&l, &r5))
         .ok_or(FitError::SingularSystem)?;
-    ellipse(&phi).ok_or(Error::NoEllipse {
-        fit_error: Figure::new(f32::INFINITY),
-        limit: Figure::new(config.thresholds.refuse_fit_error),
-    })
+    ellipse(&phi).ok_or_else(|| planar::not_an_ellipse(&config.thresholds))
 }
 
 /// What an artificial-data pass found.

@@ -14,6 +14,7 @@ use crate::tuning::{
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use crate::numerics::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
+use crate::steps::final_pass::FinalPass;
 use crate::steps::moments::Moments;
 use crate::{Error, Figure, Real};
 
@@ -291,6 +292,38 @@ impl<T: Real> Figures<T> {
             && self
                 .lack_of_fit
                 .is_some_and(|l| !(l <= T::from_single(th.refuse_lack_of_fit)))
+    }
+
+    /// Records the figures of the final pass `last`, with the fit error
+    /// `fit_error` (the pass's, or the batch fit's LS alone taken about
+    /// the mean radius).
+    #[inline(always)]
+    pub(crate) fn record_final(&mut self, last: &FinalPass<T>, fit_error: T) {
+        self.used = Some(last.used);
+        self.coverage = Some(last.coverage);
+        self.gram_condition = Some(last.gram_condition);
+        self.radial_rms = Some(last.radial_rms);
+        self.fit_error = Some(fit_error);
+        self.lack_of_fit = Some(last.lack_of_fit);
+        self.misfit_significant = last.misfit_significant;
+    }
+
+    /// The quality figures of a fit these figures passed [`judge`] for,
+    /// with its `distortion` and the figures of its final pass `last`
+    /// recorded with `fit_error` ([`Figures::record_final`]).
+    #[inline(always)]
+    pub(crate) fn quality(&self, distortion: T, last: &FinalPass<T>, fit_error: T) -> Quality<T> {
+        Quality {
+            flatness: self.flatness.unwrap_or(T::zero()),
+            quadric_gap: self.quadric_gap.unwrap_or(T::zero()),
+            distortion,
+            coverage: last.coverage,
+            gram_condition: last.gram_condition,
+            fit_error,
+            lack_of_fit: last.lack_of_fit,
+            outlier_share: self.outlier_share().unwrap_or(T::zero()),
+            skewness: self.skewness,
+        }
     }
 
     pub(crate) fn outlier_share(&self) -> Option<T> {

@@ -84,7 +84,6 @@ pub(super) fn finish<T: Real, S: Sample>(
         Ok(last) => last,
         Err(e) => return Err(judge_failure(figures, config, e)),
     };
-    figures.used = Some(last.used);
     // The rows of the spans beside runs, which the passes skipped: those
     // the gate passes count as rejected, and those of them within the cut
     // are no outliers.
@@ -108,9 +107,6 @@ pub(super) fn finish<T: Real, S: Sample>(
         });
         spanned
     };
-    figures.coverage = Some(last.coverage);
-    figures.gram_condition = Some(last.gram_condition);
-    figures.radial_rms = Some(last.radial_rms);
     // The LS fit's radius shrinks under noise (its algebraic criterion):
     // with outlier handling, its fit error is taken relative to the rows'
     // mean radius, the shell's own thickness. Measured (f32 and f64): a
@@ -121,9 +117,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     } else {
         last.fit_error
     };
-    figures.fit_error = Some(fit_error);
-    figures.lack_of_fit = Some(last.lack_of_fit);
-    figures.misfit_significant = last.misfit_significant;
+    figures.record_final(&last, fit_error);
     // Only the robust path's pass sums the cubes.
     #[cfg(feature = "robust")]
     if figures.robust {
@@ -135,17 +129,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     let warnings = quality::judge(figures, &config.thresholds)?;
     #[cfg(feature = "robust")]
     let to_sensor = |b: &rules::Ball<T>| (b.centre, b.radius_sq.square_root());
-    let quality = Quality {
-        flatness: figures.flatness.unwrap_or(T::zero()),
-        quadric_gap: figures.quadric_gap.unwrap_or(T::zero()),
-        distortion,
-        coverage: last.coverage,
-        gram_condition: last.gram_condition,
-        fit_error,
-        lack_of_fit: last.lack_of_fit,
-        outlier_share: figures.outlier_share().unwrap_or(T::zero()),
-        skewness: figures.skewness,
-    };
+    let quality = figures.quality(distortion, &last, fit_error);
     let report = Report {
         method: config.method,
         ls: config.ls,

@@ -12,7 +12,7 @@ use crate::robust::runs;
 #[cfg(feature = "robust")]
 use crate::robust::{refit, screen};
 use crate::steps::{ellipsoid, final_pass, methods, moments, normalize, rules};
-use crate::{Calibration, Config, Error, Fit, Method, Quality, Real, Report, Sample, Selection};
+use crate::{Calibration, Config, Error, Fit, Method, Real, Report, Sample, Selection};
 
 use finish::{finish, judge_failure, method_step};
 use plain::plain_path;

@@ -41,6 +41,7 @@ use crate::numerics::histogram::LogHistogram;
 use crate::numerics::linalg::{columns_of, from_columns, inverse3, larger};
 use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::methods::robust_sigma;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Projector};
 #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
@@ -174,22 +175,6 @@ impl<T: Real> Stats<T> {
         Self::from_counted(count, &total, w)
     }
 
-    /// [`Stats::accumulate`] over the rows the pass's gate passes whose
-    /// radial residual `r = |u| - 1` under the start is within the pass's
-    /// limit (0/1 weights: a weighted ADC2 pass), measuring `|r|` of every
-    /// row the gate passes into `residuals`.
-    #[cfg(any(feature = "robust", test))]
-    pub(crate) fn accumulate_with<S: Sample>(
-        samples: &[S],
-        norm: &Normalization<T>,
-        centre: &Vector3<T>,
-        w: &Matrix3<T>,
-        pass: &Pass<'_, T>,
-        residuals: &mut Residuals<T>,
-    ) -> Result<Self, Error> {
-        Self::from_pass(samples, norm, centre, w, Measure::Gated(pass, residuals))
-    }
-
     /// The pass: plain, or gated, weighted and measured.
     #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
     fn from_pass<S: Sample>(
@@ -280,43 +265,79 @@ fn times<T: Real>(a: &Matrix3<T>, [x, y, z]: [T; 3]) -> [T; 3] {
 /// triangles of `h h^T`, `g h^T = e h h^T` and `g g^T = e^2 h h^T` (6 each).
 const SUMS: usize = 24;
 
-/// The sums of a gated artificial-data pass taken over several pieces of
-/// the samples in turn (a pass in slices; [`crate::device::background`]).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PassSums<T: Real> {
+/// One gated artificial-data pass under one start, as a value that is fed
+/// the rows in slices ([`AdcPass::feed`], the background calibrator,
+/// [`crate::device::background`]) or run over all of them at once
+/// ([`AdcPass::run`], the batch fit): the same sums either way, then the
+/// same statistics and robust sigma.
+#[derive(Clone)]
+pub(crate) struct AdcPass<T: Real> {
+    /// The start `(b0, W0)`, folded with the normalisation.
+    map: Projector<T>,
+    /// Rows with `||u| - 1|` above this are left out (none when `None`).
+    limit: Option<T>,
+    /// Rows with a direction so far.
     count: usize,
     total: [T; SUMS],
+    /// The residuals of every row the gate passed.
+    residuals: Residuals<T>,
 }
 
-impl<T: Real> PassSums<T> {
-    /// No rows yet.
-    pub(crate) fn new() -> Self {
+impl<T: Real> AdcPass<T> {
+    /// The whole pass over `samples` under the start `(centre, w)` in the
+    /// coordinates of `norm`, with the gate, spans and limit of `pass`: the
+    /// statistics, and the residuals of the rows the gate passed measured
+    /// into `residuals`. No value is kept: the sums stay in the frame of
+    /// the pass, as those of the plain pass.
+    ///
+    /// [`Error::NotAnEllipsoid`] when `W0` is singular to working precision,
+    /// [`Error::TooFewSamples`] when fewer than [`crate::MIN_SAMPLES`]
+    /// rows have a direction within the limit.
+    #[cfg(any(feature = "robust", test))]
+    pub(crate) fn run<S: Sample>(
+        samples: &[S],
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        pass: &Pass<'_, T>,
+        residuals: &mut Residuals<T>,
+    ) -> Result<Stats<T>, Error> {
+        Stats::from_pass(samples, norm, centre, w, Measure::Gated(pass, residuals))
+    }
+
+    /// No rows yet: the pass under the start `(centre, w)` in the
+    /// coordinates of `norm`, leaving out rows beyond `limit`.
+    pub(crate) fn new(
+        norm: &Normalization<T>,
+        centre: &Vector3<T>,
+        w: &Matrix3<T>,
+        limit: Option<T>,
+    ) -> Self {
         Self {
+            map: Projector::new(norm, centre, w),
+            limit,
             count: 0,
             total: [T::zero(); SUMS],
+            residuals: Residuals::new(),
         }
     }
 
-    /// Adds the rows of `samples` as [`Stats::accumulate_with`] takes them.
-    pub(crate) fn add<S: Sample>(
-        &mut self,
-        samples: &[S],
-        map: &Projector<T>,
-        pass: &Pass<'_, T>,
-        residuals: &mut Residuals<T>,
-    ) {
-        self.count += sums(
-            samples,
-            map,
-            Measure::Gated(pass, residuals),
-            &mut self.total,
-        );
+    /// Adds the rows of `rows` the gate passes outside the spans of `runs`
+    /// (a slice of the samples; the rows after it come with the next call).
+    pub(crate) fn feed<S: Sample>(&mut self, rows: &[S], gate: &Gate<T>, runs: &Runs) {
+        let pass = Pass {
+            gate,
+            runs,
+            limit: self.limit,
+        };
+        let measure = Measure::Gated(&pass, &mut self.residuals);
+        self.count += sums(rows, &self.map, measure, &mut self.total);
     }
 
-    /// The statistics of every row added, under the start `w`.
+    /// The statistics of every row fed, under the start `w` (the pass's).
     ///
     /// # Errors
-    /// As [`Stats::accumulate_with`].
+    /// As [`AdcPass::run`].
     pub(crate) fn stats(&self, w: &Matrix3<T>) -> Result<Stats<T>, Error> {
         if self.count < crate::steps::normalize::MIN_SAMPLES {
             return Err(Error::TooFewSamples {
@@ -325,6 +346,12 @@ impl<T: Real> PassSums<T> {
             });
         }
         Stats::from_sums(self.count, &self.total, w)
+    }
+
+    /// The robust standard deviation of the residuals of the rows the gate
+    /// passed (see [`robust_sigma`]); `None` before any.
+    pub(crate) fn sigma(&self) -> Option<T> {
+        robust_sigma(&self.residuals.hist)
     }
 }
 
@@ -754,7 +781,7 @@ mod tests {
             limit: None,
         };
         let mut res = Residuals::new();
-        let gated = Stats::accumulate_with(&samples, &norm, &b0, &w0, &pass, &mut res).unwrap();
+        let gated = AdcPass::run(&samples, &norm, &b0, &w0, &pass, &mut res).unwrap();
         let rows = Stats::accumulate_rows(&samples, &norm, &b0, &w0, &gate).unwrap();
         assert_eq!(rows, gated);
         // The zero row and the repeat dropped.
@@ -825,6 +852,62 @@ mod tests {
         }
         #[cfg(not(feature = "robust"))]
         assert!(dirty.kurtosis > 3.0 * clean.kurtosis, "{dirty:?}");
+    }
+
+    /// The pass fed in slices is the pass run whole: bit for bit when the
+    /// slices are whole blocks (each block's sums are added to the total
+    /// in the same order), to rounding otherwise; the same rows cut, the
+    /// same residuals.
+    #[test]
+    fn the_pass_in_slices_is_the_pass_run_whole() {
+        let mut rng = Rng(3);
+        let norm = Normalization {
+            centre: Vector3::new(20.0, -10.0, 5.0),
+            scale: 30.0,
+            inv_scale: 1.0 / 30.0,
+        };
+        let b0 = Vector3::new(0.01, 0.02, -0.01);
+        let w0 = Matrix3::new(1.02, 0.01, 0.0, 0.01, 0.98, 0.02, 0.0, 0.02, 1.0);
+        let t0 = w0.try_inverse().unwrap();
+        let mut samples = [[0.0f64; 3]; 1000];
+        for (i, s) in samples.iter_mut().enumerate() {
+            // Every 25th row 0.2 off the ellipsoid: beyond the cut.
+            let off = if i % 25 == 0 { 0.2 } else { 0.0 };
+            let x = b0 + t0 * (rng.direction() * rng.range(0.99 + off, 1.01 + off));
+            let y = norm.point_back(&x);
+            *s = [y.x, y.y, y.z];
+        }
+        let (gate, limit) = (Gate::PLAIN, Some(0.05));
+        let pass = Pass {
+            gate: &gate,
+            runs: &Runs::NONE,
+            limit,
+        };
+        let mut res = Residuals::new();
+        let whole = AdcPass::run(&samples, &norm, &b0, &w0, &pass, &mut res).unwrap();
+        assert_eq!(whole.count, 1000 - 40);
+        let whole_sigma = robust_sigma::<f64>(&res.hist);
+        for slice in [128, 256, 37, 1] {
+            let mut fed = AdcPass::new(&norm, &b0, &w0, limit);
+            for rows in samples.chunks(slice) {
+                fed.feed(rows, &gate, &Runs::NONE);
+            }
+            let got = fed.stats(&w0).unwrap();
+            assert_eq!(got.count, whole.count);
+            assert_eq!(fed.sigma(), whole_sigma);
+            if slice % BLOCK == 0 {
+                assert_eq!(got, whole, "slices of {slice}");
+            } else {
+                let close = |a: &[f64], b: &[f64]| {
+                    a.iter()
+                        .zip(b)
+                        .all(|(x, y)| (x - y).abs() <= 1e-9 * (1.0 + y.abs()))
+                };
+                assert!(close(got.s_hh.as_slice(), whole.s_hh.as_slice()), "{slice}");
+                assert!(close(got.s_rr.as_slice(), whole.s_rr.as_slice()), "{slice}");
+                assert!(close(got.s_rh.as_slice(), whole.s_rh.as_slice()), "{slice}");
+            }
+        }
     }
 
     #[test]

@@ -267,6 +267,45 @@ pub(crate) struct Cut<T: Real> {
     pub limit: T,
 }
 
+/// A moments pass as a value, fed the rows in slices
+/// ([`MomentsPass::feed`], the background calibrator,
+/// [`crate::device::background`]); the batch fit runs the same pass over
+/// all of them at once ([`Moments::accumulate_with`]). The moments of the
+/// slices add up (power sums), in blocks of [`BLOCK`] rows from each
+/// slice's start: slices of one block give the whole pass's sums bit for
+/// bit, others the same to rounding.
+#[derive(Clone, Copy)]
+pub(crate) struct MomentsPass<T: Real> {
+    norm: Normalization<T>,
+    cut: Option<Cut<T>>,
+    moments: Moments<T>,
+}
+
+impl<T: Real> MomentsPass<T> {
+    /// No rows yet: the moments of the rows normalised by `norm` (within
+    /// `cut`, when given).
+    pub(crate) fn new(norm: Normalization<T>, cut: Option<Cut<T>>) -> Self {
+        Self {
+            norm,
+            cut,
+            moments: Moments::zero(),
+        }
+    }
+
+    /// Adds the rows of `rows` the gate passes (a slice of the samples; the
+    /// rows after it come with the next call).
+    pub(crate) fn feed<S: Sample>(&mut self, rows: &[S], gate: &Gate<T>) {
+        let cut = self.cut.as_ref();
+        let slice = Moments::accumulate_with(rows, &self.norm, gate, cut, None);
+        self.moments.add(&slice);
+    }
+
+    /// The moments of every row fed.
+    pub(crate) fn moments(&self) -> &Moments<T> {
+        &self.moments
+    }
+}
+
 // The two block sums are separate functions, not inlined into `accumulate`,
 // so that each loop gets the floating-point registers to itself: inlined,
 // the normalisation constants of one loop spill during the other.
@@ -460,6 +499,48 @@ mod tests {
         }
         for (k, [p, q, r]) in EXPONENTS.iter().enumerate() {
             assert_eq!(INDEX[*p as usize][*q as usize][*r as usize] as usize, k);
+        }
+    }
+
+    /// The moments pass fed in slices of one block is the pass run over
+    /// every row at once, bit for bit, with the same rows cut; in other
+    /// slices, to rounding.
+    #[test]
+    fn the_moments_in_slices_are_the_moments_of_the_whole() {
+        let mut rng = crate::test_support::Rng(5);
+        let norm: Normalization<f64> = Normalization {
+            centre: nalgebra::Vector3::new(3.0, -2.0, 1.0),
+            scale: 10.0,
+            inv_scale: 0.1,
+        };
+        let mut samples = [[0.0f64; 3]; 700];
+        for (i, s) in samples.iter_mut().enumerate() {
+            // Every 10th row off the unit sphere about the centre: cut.
+            let r = if i % 10 == 0 { 13.0 } else { 10.0 };
+            let d = rng.direction() * r;
+            *s = [3.0 + d.x, -2.0 + d.y, 1.0 + d.z];
+        }
+        let w = nalgebra::Matrix3::identity();
+        let cut = Cut {
+            map: Projector::new(&norm, &nalgebra::Vector3::zeros(), &w),
+            limit: 0.1,
+        };
+        let gate = Gate::PLAIN;
+        let whole = Moments::accumulate_with(&samples, &norm, &gate, Some(&cut), None);
+        assert_eq!(whole.count(), 630);
+        for slice in [BLOCK, 2 * BLOCK, 37] {
+            let mut fed = MomentsPass::new(norm, Some(cut));
+            for rows in samples.chunks(slice) {
+                fed.feed(rows, &gate);
+            }
+            if slice == BLOCK {
+                assert_eq!(fed.moments(), &whole);
+            } else {
+                // Block sums added in another grouping: equal to rounding.
+                for (got, want) in fed.moments().sums.iter().zip(whole.sums) {
+                    assert!((got - want).abs() <= 1e-12 * want.abs().max(1.0), "{slice}");
+                }
+            }
         }
     }
 

@@ -11,7 +11,7 @@ use crate::robust::runs::Runs;
 use crate::sample::Sample;
 use crate::steps::artificial::Stats;
 #[cfg(feature = "robust")]
-use crate::steps::artificial::{Pass, Residuals};
+use crate::steps::artificial::{AdcPass, Pass, Residuals};
 use crate::steps::ellipsoid::Ellipsoid;
 use crate::steps::final_pass::DirectionSums;
 use crate::steps::normalize::Normalization;
@@ -260,7 +260,7 @@ fn measured_stats<T: Real, S: Sample>(
         runs: weights.runs,
         limit: weights.limit(),
     };
-    let stats = Stats::accumulate_with(samples, norm, centre, w, &pass, &mut res)?;
+    let stats = AdcPass::run(samples, norm, centre, w, &pass, &mut res)?;
     Ok(Some((stats, robust_sigma(&res.hist), res.max)))
 }
 
