@@ -560,7 +560,10 @@ fn glitch<S: Sample>(sample: &S, prev: Option<&S>) -> Option<Rule> {
 pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Drops {
     let mut drops = Drops::default();
     let mut prev = None;
-    if S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
+    // Without the `robust` feature, the gated loop below alone (flash over
+    // speed, as [`Gate::plain_loop`]: LS9 + ADC2 plain 22 348 -> 22 056
+    // bytes, `bash bench.sh flash`).
+    if cfg!(feature = "robust") && S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
         // Integer rows: the loop of the scan on clean data, no conversion.
         // The three tests are combined without branches (`|`, not `||`);
         // only a flagged row takes the branch that names its rule.
