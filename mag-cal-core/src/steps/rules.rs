@@ -299,7 +299,11 @@ impl<T: Real> Gate<T> {
     /// bytes of flash, the plain build's 22 504 -> 22 420, `bash bench.sh
     /// flash`; clean `adc2` 472 160 -> 470 240 instructions).
     #[inline(never)]
-    fn admit<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Result<[T; 3], Option<Rule>> {
+    pub(crate) fn admit<S: Sample>(
+        &self,
+        sample: &S,
+        prev: Option<&S>,
+    ) -> Result<[T; 3], Option<Rule>> {
         let y = check::<T, S>(sample, prev, &self.rules).map_err(Some)?;
         match &self.screen {
             Some(ball) if !ball.contains(y) => Err(None),
