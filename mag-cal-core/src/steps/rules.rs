@@ -279,20 +279,35 @@ impl<T: Real> Gate<T> {
         cfg!(feature = "robust") && self.is_plain()
     }
 
-    /// The components of a row the gate passes.
+    /// The components of a row the gate passes ([`Gate::admit`]).
     ///
-    /// Out of line: one copy for every gated loop. Inlined, the rules and
+    /// Out of line (in `admit`): one copy for every gated loop. Inlined, the rules and
     /// the ball took about 300 bytes in each of 16 loops (LS9 + ADC2 on a
     /// Cortex-M4F: 47 312 -> 42 616 bytes of flash, `bench.sh footprint`),
     /// for about 10 instructions a gated row more (LS9 + ADC2, n = 1000,
     /// a tenth of the rows displaced: 1.56 M -> 1.70 M instructions; clean
     /// data take the plain loops, [`Finite`], and do not pay it).
-    #[inline(never)]
+    #[inline(always)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
-        let y = check::<T, S>(sample, prev, &self.rules).ok()?;
+        self.admit(sample, prev).ok()
+    }
+
+    /// The components of a row the gate passes, or the rule that drops
+    /// it (`None`: outside the ball). Out of line, the one copy of the
+    /// rules ([`Gate::pass`], and [`count_drops`] with clip levels or on
+    /// floating-point rows: LS9 + ADC2 on a Cortex-M4F 36 592 -> 36 528
+    /// bytes of flash, the plain build's 22 504 -> 22 420, `bash bench.sh
+    /// flash`; clean `adc2` 472 160 -> 470 240 instructions).
+    #[inline(never)]
+    pub(crate) fn admit<S: Sample>(
+        &self,
+        sample: &S,
+        prev: Option<&S>,
+    ) -> Result<[T; 3], Option<Rule>> {
+        let y = check::<T, S>(sample, prev, &self.rules).map_err(Some)?;
         match &self.screen {
-            Some(ball) if !ball.contains(y) => None,
-            _ => Some(y),
+            Some(ball) if !ball.contains(y) => Err(None),
+            _ => Ok(y),
         }
     }
 
@@ -549,7 +564,10 @@ fn glitch<S: Sample>(sample: &S, prev: Option<&S>) -> Option<Rule> {
 pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Drops {
     let mut drops = Drops::default();
     let mut prev = None;
-    if S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
+    // Without the `robust` feature, the gated loop below alone (flash over
+    // speed, as [`Gate::plain_loop`]: LS9 + ADC2 plain 22 348 -> 22 056
+    // bytes, `bash bench.sh flash`).
+    if cfg!(feature = "robust") && S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
         // Integer rows: the loop of the scan on clean data, no conversion.
         // The three tests are combined without branches (`|`, not `||`);
         // only a flagged row takes the branch that names its rule.
@@ -570,8 +588,15 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
         }
         return drops;
     }
+    // Through the gate's out-of-line check, no ball: no second copy of
+    // the rules for this loop (it runs with clip levels or on
+    // floating-point rows).
+    let gate = Gate {
+        rules: *rules,
+        screen: None,
+    };
     for s in samples {
-        if let Err(rule) = check::<T, S>(s, prev, rules) {
+        if let Err(Some(rule)) = gate.admit(s, prev) {
             drops.count(rule);
         }
         prev = Some(s);
