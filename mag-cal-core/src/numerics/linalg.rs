@@ -580,11 +580,15 @@ fn positive_definite_eigen<T: Real>(m: &Matrix3<T>) -> Result<SymEigen<T, 3>, Er
     Ok(eig)
 }
 
-/// `V f(Lambda) V^T` from an eigen-decomposition, exactly symmetric.
-fn spectral<T: Real>(eig: &SymEigen<T, 3>, f: impl Fn(T) -> T) -> Matrix3<T> {
+/// `V f(Lambda) V^T` from an eigen-decomposition, exactly symmetric:
+/// `f(l) = sqrt(l)` when `root`, else `1 / sqrt(l)`. A flag, not a closure,
+/// and out of line: one copy serves both roots (LS9 + ADC2 on a Cortex-M4F,
+/// `bash bench.sh flash`: see the commit that made it so).
+#[inline(never)]
+fn spectral<T: Real>(eig: &SymEigen<T, 3>, root: bool) -> Matrix3<T> {
     let mut fm = [[T::zero(); 3]; 3];
     for (v, &l) in eig.vectors.iter().zip(&eig.values) {
-        let fl = f(l);
+        let fl = if root { l * inv_sqrt(l) } else { inv_sqrt(l) };
         for i in 0..3 {
             for j in i..3 {
                 fm[i][j] += fl * (v[i] * v[j]);
@@ -615,20 +619,17 @@ pub(crate) fn sym_sqrt_and_inv_sqrt<T: Real>(
     m: &Matrix3<T>,
 ) -> Result<(Matrix3<T>, Matrix3<T>), Error> {
     let eig = positive_definite_eigen(m)?;
-    Ok((
-        spectral(&eig, |l| l * inv_sqrt(l)),
-        spectral(&eig, inv_sqrt),
-    ))
+    Ok((spectral(&eig, true), spectral(&eig, false)))
 }
 
 /// The symmetric positive definite square root `M^(1/2)`.
 pub(crate) fn sym_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    Ok(spectral(&positive_definite_eigen(m)?, |l| l * inv_sqrt(l)))
+    Ok(spectral(&positive_definite_eigen(m)?, true))
 }
 
 /// The symmetric positive definite inverse square root `M^(-1/2)`.
 pub(crate) fn sym_inv_sqrt<T: Real>(m: &Matrix3<T>) -> Result<Matrix3<T>, Error> {
-    Ok(spectral(&positive_definite_eigen(m)?, inv_sqrt))
+    Ok(spectral(&positive_definite_eigen(m)?, false))
 }
 
 #[cfg(test)]
