@@ -420,10 +420,12 @@ pub(crate) const REFUSE_SKEWNESS: f64 = -0.6;
 /// 6/7/7/11/9/7/11 and 5/7/7/10/8/7/9 (plain iteration: 15/21/68/83/24/20/77).
 ///
 /// Set at `c6c0074`. Evidence: `cargo run --release -p host-tests --bin paper-tables` (passes per scenario).
+#[cfg(feature = "adc2-iter")]
 pub(crate) const MIXING: f64 = 1.8;
 /// Anderson memory.
 ///
 /// Set at `21e77b4`. Evidence: none recorded: Anderson(5) as first written; an open question.
+#[cfg(feature = "adc2-iter")]
 pub(crate) const MEMORY: usize = 5;
 
 // ---- The collector's sphere fit (`numerics::sphere`) ----
