@@ -42,9 +42,8 @@ use robust::robust_path;
 /// [`Error::NotEnabled`](crate::Error::NotEnabled).
 #[inline(always)]
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
-    // Here, inlined: with a constant `Config` the check folds away (LS9 +
-    // ADC2 40 392 B either way; inside `pipeline`, 41 108 B: `bash
-    // bench.sh flash`).
+    // Here, inlined: with a constant `Config` the check folds away (inside
+    // the out-of-line `pipeline` it cost 716 B: `bash bench.sh flash`).
     config.thresholds.validate()?;
     let step: methods::Step<T, S> = match config.method {
         Method::Ls => methods::ls_only,

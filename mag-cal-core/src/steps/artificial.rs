@@ -428,18 +428,24 @@ fn sums<T: Real, S: Sample>(
             };
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
-        // Four sums a step: one a step takes twice the instructions.
-        const { assert!(SUMS.is_multiple_of(4)) };
-        let quads = total
-            .as_chunks_mut::<4>()
-            .0
-            .iter_mut()
-            .zip(a.as_chunks::<4>().0);
-        for (t, v) in quads {
-            *t = [t[0] + v[0], t[1] + v[1], t[2] + v[2], t[3] + v[3]];
-        }
+        add_sums(total, &a);
     }
     count
+}
+
+/// Adds a block's sums `a` to the pass's `total`, four sums a step (one a
+/// step takes twice the instructions).
+#[inline(always)]
+fn add_sums<T: Real>(total: &mut [T; SUMS], a: &[T; SUMS]) {
+    const { assert!(SUMS.is_multiple_of(4)) };
+    let quads = total
+        .as_chunks_mut::<4>()
+        .0
+        .iter_mut()
+        .zip(a.as_chunks::<4>().0);
+    for (t, v) in quads {
+        *t = [t[0] + v[0], t[1] + v[1], t[2] + v[2], t[3] + v[3]];
+    }
 }
 
 /// [`sums`] of the plain build's pass ([`Stats::accumulate_rows`]): the
@@ -462,14 +468,7 @@ fn row_sums<T: Real, S: Sample>(
             count += row_directions(chunk, prev, map, gate, &mut buf);
             add_directions(&mut a, buf.get(..chunk.len()).unwrap_or(&[]));
         }
-        let quads = total
-            .as_chunks_mut::<4>()
-            .0
-            .iter_mut()
-            .zip(a.as_chunks::<4>().0);
-        for (t, v) in quads {
-            *t = [t[0] + v[0], t[1] + v[1], t[2] + v[2], t[3] + v[3]];
-        }
+        add_sums(total, &a);
     }
     count
 }
