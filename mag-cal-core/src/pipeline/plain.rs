@@ -38,7 +38,7 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     // Without outlier handling compiled in, no route to decide: the fit
     // is the answer.
     #[cfg(not(feature = "robust"))]
-    return finish(samples, config, &start, &est, &mut figures).map(|done| done.fit);
+    return finish(samples, config, &start, &est, &mut figures);
     #[cfg(feature = "robust")]
     {
         if est.beyond_tails_limit {
