@@ -7,7 +7,7 @@ use crate::tuning::{LOF_CELLS, LOF_MIN_ROWS, LOF_SIGNIFICANCE};
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
-use crate::numerics::linalg::{columns_of, larger, min_max, sym_eigenvalues};
+use crate::numerics::linalg::{larger, min_max, sym_eigenvalues};
 use crate::robust::runs::Runs;
 use crate::steps::artificial::Stats;
 use crate::steps::moments::BLOCK;
@@ -283,16 +283,23 @@ impl<T: Real> FinalSums<T> {
 /// condition number of their Gram matrix `G / n`.
 fn direction_figures<T: Real>(d: &DirectionSums<T>) -> Result<(T, T), Error> {
     let n = T::from_count(d.count);
-    let mean = d.s_h / n;
-    let second = d.s_hh / n;
-    let cov = second - mean * mean.transpose();
-    let (coverage, _) = min_max(&sym_eigenvalues(&columns_of(&cov))?);
-    let g = [
-        [second[(0, 0)], second[(0, 1)], second[(0, 2)], mean.x],
-        [second[(1, 0)], second[(1, 1)], second[(1, 2)], mean.y],
-        [second[(2, 0)], second[(2, 1)], second[(2, 2)], mean.z],
-        [mean.x, mean.y, mean.z, T::one()],
-    ];
+    let mean = [d.s_h.x / n, d.s_h.y / n, d.s_h.z / n];
+    // The covariance `G3 / n - mean mean^T` (symmetric: by columns or by
+    // rows alike) and `G / n`, by rows, straight from the sums: through
+    // nalgebra's temporaries they took 208 bytes of flash more (LS9 +
+    // ADC2 without `robust`; 196 with it; `bash bench.sh flash`).
+    let mut cov = [[T::zero(); 3]; 3];
+    let mut g = [[T::zero(); 4]; 4];
+    for (i, (ci, gi)) in cov.iter_mut().zip(g.iter_mut()).enumerate() {
+        for (j, (c, x)) in ci.iter_mut().zip(gi.iter_mut()).enumerate() {
+            let second = d.s_hh[(i, j)] / n;
+            *c = second - mean[i] * mean[j];
+            *x = second;
+        }
+        gi[3] = mean[i];
+    }
+    g[3] = [mean[0], mean[1], mean[2], T::one()];
+    let (coverage, _) = min_max(&sym_eigenvalues(&cov)?);
     let (gmin, gmax) = min_max(&sym_eigenvalues(&g)?);
     let gram_condition = if gmin > T::zero() {
         gmax / gmin
