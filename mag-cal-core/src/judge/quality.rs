@@ -11,7 +11,7 @@ use crate::tuning::{
     WARN_FIT_ERROR, WARN_FLATNESS, WARN_GRAM_CONDITION, WARN_QUADRIC_GAP, WARN_SAMPLES,
     WARN_SPREAD_OVER_NOISE,
 };
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, SMatrix};
 
 use crate::numerics::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
 use crate::steps::final_pass::FinalPass;
@@ -502,20 +502,22 @@ fn beyond_magnitude<T: Real>(v: T, limit: f32) -> Figure {
 /// moments of the normalised samples (their first and second moments).
 pub(crate) fn flatness<T: Real>(m: &Moments<T>, count: usize) -> Result<T, Error> {
     let n = T::from_count(count);
-    let mean = Vector3::new(m.get(1, 0, 0), m.get(0, 1, 0), m.get(0, 0, 1)) / n;
-    let second = Matrix3::new(
-        m.get(2, 0, 0),
-        m.get(1, 1, 0),
-        m.get(1, 0, 1),
-        m.get(1, 1, 0),
-        m.get(0, 2, 0),
-        m.get(0, 1, 1),
-        m.get(1, 0, 1),
-        m.get(0, 1, 1),
-        m.get(0, 0, 2),
-    ) / n;
-    let cov = second - mean * mean.transpose();
-    let (min, max) = min_max(&sym_eigenvalues(&columns_of(&cov))?);
+    let mean = [m.get(1, 0, 0) / n, m.get(0, 1, 0) / n, m.get(0, 0, 1) / n];
+    let second = [
+        [m.get(2, 0, 0), m.get(1, 1, 0), m.get(1, 0, 1)],
+        [m.get(1, 1, 0), m.get(0, 2, 0), m.get(0, 1, 1)],
+        [m.get(1, 0, 1), m.get(0, 1, 1), m.get(0, 0, 2)],
+    ];
+    // `second / n - mean mean^T` (symmetric), straight from the sums:
+    // through nalgebra's temporaries it took 12 bytes of flash more (LS9 +
+    // ADC2, with or without `robust`, `bash bench.sh flash`).
+    let mut cov = [[T::zero(); 3]; 3];
+    for (i, (ci, si)) in cov.iter_mut().zip(&second).enumerate() {
+        for (j, (c, &s)) in ci.iter_mut().zip(si).enumerate() {
+            *c = s / n - mean[i] * mean[j];
+        }
+    }
+    let (min, max) = min_max(&sym_eigenvalues(&cov)?);
     if !(max > T::zero()) {
         return Err(Error::AllSamplesEqual);
     }
