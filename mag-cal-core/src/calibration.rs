@@ -71,7 +71,14 @@ impl<T: Real> Calibration<T> {
         // det(W) itself is subnormal in f32 once rho exceeds about 4e12
         // sensor units, and then carries too few bits (20 % errors were
         // found by fuzzing). The scaled determinant is at most 6.
-        let scale = w.amax();
+        // `w.amax()` on the slice (nalgebra's iterator took more flash):
+        // the same fold, the first entry's magnitude then the largest.
+        let entries = w.as_slice();
+        let first = entries.first().map_or(T::zero(), |x| x.abs());
+        let scale = entries
+            .iter()
+            .skip(1)
+            .fold(first, |a, b| nalgebra::SimdPartialOrd::simd_max(a, b.abs()));
         if !(scale > T::zero()) || !scale.is_finite() {
             return Err(Error::SingularSystem);
         }
@@ -80,7 +87,7 @@ impl<T: Real> Calibration<T> {
             return Err(Error::SingularSystem);
         }
         let field_strength = T::one() / (scale * det.positive_cbrt());
-        if !field_strength.is_finite() || !hard_iron.iter().all(|v| v.is_finite()) {
+        if !field_strength.is_finite() || !hard_iron.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Error::OutOfRange);
         }
         Ok(Self {

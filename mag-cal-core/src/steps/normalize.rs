@@ -157,7 +157,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
     }
     // Refuse spreads whose squares overflow, or that are so small that their
     // squares approach the subnormal range and lose significant bits.
-    if !centre.iter().all(|c| c.is_finite())
+    if !centre.as_slice().iter().all(|c| c.is_finite())
         || !var.is_finite()
         || var < T::MIN_POSITIVE / T::EPSILON
     {
