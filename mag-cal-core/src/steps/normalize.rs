@@ -150,10 +150,11 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         return Err(Error::AllSamplesEqual);
     }
     let n = T::from_count(sums.used);
-    let mean = Vector3::new(sum[0] / n, sum[1] / n, sum[2] / n);
-    let centre = Vector3::new(o[0], o[1], o[2]) + mean;
+    // Per component, as `point_back`.
+    let mean = [sum[0] / n, sum[1] / n, sum[2] / n];
+    let centre = Vector3::new(o[0] + mean[0], o[1] + mean[1], o[2] + mean[2]);
     let mean_sq = sum_sq / n;
-    let mut var = mean_sq - mean.norm_squared();
+    let mut var = mean_sq - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
     // Catastrophic cancellation: y0 lies far outside the cloud (a wild first
     // sample). Recompute the spread around the mean; this path is rare.
     if !(var > mean_sq * T::lit(1e-2)) {
