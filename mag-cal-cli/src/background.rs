@@ -268,7 +268,8 @@ pub fn replay(samples: &[[f64; 3]], precision: Precision, steps: u32) -> Replay 
 fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32) -> Replay {
     let config = BackgroundConfig::DEFAULT;
     // About 10 KB for f64 samples: on the heap.
-    let mut bg: Box<Calibrator<T, S>> = Box::new(Background::new(config));
+    let mut bg: Box<Calibrator<T, S>> =
+        Box::new(Background::new(config).expect("the default configuration is valid"));
     let mut log = Log::default();
     for (row, sample) in samples.iter().enumerate() {
         let pushed = bg.push(*sample);

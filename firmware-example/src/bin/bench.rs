@@ -576,7 +576,7 @@ fn background(timer: &Timer) -> bool {
     use firmware_example::sim::Motion;
     use mag_cal_core::background::{Background, BackgroundConfig, Stepped};
     type Calibrator = Background<f32, [i16; 3], 288, 6>;
-    let Some(bg) = cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT))
+    let Some(Ok(bg)) = cortex_m::singleton!(: Result<Calibrator, mag_cal_core::Error> = Background::new(BackgroundConfig::DEFAULT))
     else {
         return false;
     };

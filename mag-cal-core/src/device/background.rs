@@ -38,7 +38,7 @@
 //! use mag_cal_core::background::{Background, BackgroundConfig};
 //!
 //! // 48 cells of 4 samples; f32.
-//! let mut bg: Background<f32, [f32; 3], 192, 4> = Background::new(BackgroundConfig::default());
+//! let mut bg: Background<f32, [f32; 3], 192, 4> = Background::new(BackgroundConfig::default())?;
 //! for k in 0..6000 {
 //!     // A device turned slowly through most orientations.
 //!     let z = (k as f32 * 0.0021).sin();
@@ -51,6 +51,7 @@
 //! let cal = bg.calibration().expect("calibrated in the background");
 //! assert!((cal.hard_iron()[0] - 250.0).abs() < 1.0);
 //! assert!(!bg.is_stale());
+//! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 
 use crate::tuning::OUTLIER_CUT;
@@ -138,6 +139,36 @@ impl BackgroundConfig {
         stale_readings: 200,
         thresholds: Thresholds::DEFAULT,
     };
+}
+
+impl BackgroundConfig {
+    /// `Ok` when every value can be used, else the first that cannot:
+    /// [`Error::InvalidConfig`] naming the field (a NaN, an angle outside
+    /// 0-180 degrees, a `stale_rms` that is not positive and finite, a
+    /// `slice` of 0, more `min_cells` than there are cells ([`CELLS`]),
+    /// or one of the [`Thresholds`], [`Thresholds::validate`]).
+    ///
+    /// ```
+    /// use mag_cal_core::background::BackgroundConfig;
+    /// use mag_cal_core::Error;
+    /// assert_eq!(BackgroundConfig::DEFAULT.validate(), Ok(()));
+    /// let mut bad = BackgroundConfig::DEFAULT;
+    /// bad.slice = 0;
+    /// assert_eq!(bad.validate(), Err(Error::InvalidConfig { field: "slice" }));
+    /// ```
+    pub fn validate(&self) -> Result<(), Error> {
+        quality::check("min_angle_deg", self.min_angle_deg, 0.0, 180.0)?;
+        if !(self.stale_rms > 0.0 && self.stale_rms.is_finite()) {
+            return Err(Error::InvalidConfig { field: "stale_rms" });
+        }
+        if self.slice == 0 {
+            return Err(Error::InvalidConfig { field: "slice" });
+        }
+        if self.min_cells > CELLS {
+            return Err(Error::InvalidConfig { field: "min_cells" });
+        }
+        self.thresholds.validate()
+    }
 }
 
 impl Default for BackgroundConfig {
@@ -361,28 +392,16 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         "Background<_, _, N, K> needs N == 48 * K, 0 < K < 256"
     );
 
-    /// An empty calibrator. A configuration value that is not positive and
-    /// finite where it must be (the angle may be 0) is replaced by its
-    /// default.
-    pub fn new(config: BackgroundConfig) -> Self {
+    /// An empty calibrator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] when a value of `config` cannot be used
+    /// ([`BackgroundConfig::validate`]).
+    pub fn new(config: BackgroundConfig) -> Result<Self, Error> {
         let () = Self::SHAPE;
-        let d = BackgroundConfig::DEFAULT;
-        let config = BackgroundConfig {
-            min_angle_deg: if config.min_angle_deg >= 0.0 && config.min_angle_deg <= 180.0 {
-                config.min_angle_deg
-            } else {
-                d.min_angle_deg
-            },
-            stale_rms: if config.stale_rms > 0.0 && config.stale_rms.is_finite() {
-                config.stale_rms
-            } else {
-                d.stale_rms
-            },
-            slice: config.slice.max(1),
-            ..config
-        };
+        config.validate()?;
         let chord = 2.0 * libm::sinf(0.5 * config.min_angle_deg.to_radians());
-        Self {
+        Ok(Self {
             config,
             min_chord_sq: chord * chord,
             store: heapless::Vec::new(),
@@ -403,15 +422,18 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             watch: Watch::CALM,
             last_offsets_try: 0,
             counters: Counters::default(),
-        }
+        })
     }
 
     /// A calibrator that starts from a stored calibration (its fit error
     /// as given, e.g. that of the fit's report).
-    pub fn with_calibration(config: BackgroundConfig, current: Current<T>) -> Self {
-        let mut bg = Self::new(config);
+    ///
+    /// # Errors
+    /// As [`Background::new`].
+    pub fn with_calibration(config: BackgroundConfig, current: Current<T>) -> Result<Self, Error> {
+        let mut bg = Self::new(config)?;
         bg.current = Some(current);
-        bg
+        Ok(bg)
     }
 
     /// The calibration in use, if any.
@@ -1152,7 +1174,8 @@ mod tests {
         let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig {
             min_angle_deg: 0.0,
             ..BackgroundConfig::DEFAULT
-        });
+        })
+        .unwrap();
         for round in 0..2000 {
             let v = [
                 rng.symmetric() as f32,
@@ -1171,8 +1194,73 @@ mod tests {
     }
 
     #[test]
+    fn a_configuration_that_cannot_be_used_is_refused_by_name() {
+        let d = BackgroundConfig::DEFAULT;
+        let cases = [
+            (
+                BackgroundConfig {
+                    min_angle_deg: -1.0,
+                    ..d
+                },
+                "min_angle_deg",
+            ),
+            (
+                BackgroundConfig {
+                    min_angle_deg: f32::NAN,
+                    ..d
+                },
+                "min_angle_deg",
+            ),
+            (
+                BackgroundConfig {
+                    stale_rms: 0.0,
+                    ..d
+                },
+                "stale_rms",
+            ),
+            (
+                BackgroundConfig {
+                    stale_rms: f32::INFINITY,
+                    ..d
+                },
+                "stale_rms",
+            ),
+            (BackgroundConfig { slice: 0, ..d }, "slice"),
+            (
+                BackgroundConfig {
+                    min_cells: CELLS + 1,
+                    ..d
+                },
+                "min_cells",
+            ),
+            (
+                BackgroundConfig {
+                    thresholds: Thresholds {
+                        refuse_coverage: f32::NAN,
+                        ..Thresholds::DEFAULT
+                    },
+                    ..d
+                },
+                "refuse_coverage",
+            ),
+        ];
+        for (config, field) in cases {
+            let made: Result<Background<f32, [f32; 3], 96, 2>, _> = Background::new(config);
+            assert_eq!(made.err(), Some(Error::InvalidConfig { field }));
+        }
+        let edge = BackgroundConfig {
+            min_angle_deg: 0.0,
+            min_cells: CELLS,
+            slice: 1,
+            ..d
+        };
+        assert!(Background::<f32, [f32; 3], 96, 2>::new(edge).is_ok());
+    }
+
+    #[test]
     fn a_full_cell_replaces_its_oldest_sample() {
-        let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig::DEFAULT);
+        let mut bg: Background<f32, [f32; 3], 96, 2> =
+            Background::new(BackgroundConfig::DEFAULT).unwrap();
         for k in 0..5 {
             bg.store_in([k as f32, 0.0, 0.0], 3);
         }
