@@ -1097,7 +1097,7 @@ fn adc_end<T: Real>(
     pass: &AdcPass<T>,
 ) -> Result<RefitPass<T>, Error> {
     let stats = pass.stats(&start.w)?;
-    let sol = adc2::solve_closed_form(&stats, &start.t, &start.centre)?;
+    let sol = adc2::solve(&stats, &start.t, &start.centre)?;
     let est = Estimate {
         centre: sol.centre,
         w: sym_inv_sqrt(&(sol.t * sol.t.transpose()))?,
