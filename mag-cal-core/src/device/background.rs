@@ -192,6 +192,12 @@ pub enum Pushed {
     Invalid,
     /// Not buffered: far off the calibrated sphere (a wild reading).
     Wild,
+    /// Not buffered, before the first calibration: the device, smoothed
+    /// over its noise, lies within the sensor's noise spacing
+    /// ([`crate::device::collector::NOISE_SPACING`]) of the running
+    /// centre, as a device lying still does (or while the noise is learnt,
+    /// the first few readings after the first).
+    Still,
 }
 
 /// What [`Background::step`] did.
@@ -374,6 +380,8 @@ pub struct Background<T: Real, S: Sample, const N: usize, const K: usize> {
     head: [u8; CELLS],
     sphere: CentreFit,
     last_direction: Option<[f32; 3]>,
+    /// The sensor's noise, learnt from the readings before a calibration.
+    noise: collector::NoiseGate,
     recent: heapless::Vec<S, RECENT>,
     recent_next: usize,
     recent_direction: Option<[f32; 3]>,
@@ -412,6 +420,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             head: [0; CELLS],
             sphere: CentreFit::EMPTY,
             last_direction: None,
+            noise: collector::NoiseGate::EMPTY,
             recent: heapless::Vec::new(),
             recent_next: 0,
             recent_direction: None,
@@ -529,12 +538,35 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                 u
             }
             None => {
+                // Before a calibration, directions are taken from the
+                // running sphere's centre. A device lying still puts that
+                // centre inside its noise, which then points every way: its
+                // readings would fill every cell, and the motion after them
+                // would be wild to that tiny sphere (6 000 still readings
+                // at 0.2 % noise: all 48 cells filled, never calibrated;
+                // `still_periods_change_nothing_in_the_background`). So a
+                // reading is buffered only when the device, smoothed over
+                // its noise, lies beyond the noise spacing of the collector
+                // ([`collector::NOISE_SPACING`]) from that centre, and the
+                // wild test waits for a sphere larger than the spacing. A
+                // turning device is a field strength from the centre, far
+                // beyond the spacing (30 % of the field at 3 % noise).
+                let spacing_sq = self.noise.take(y32).map(|d| d * d);
                 let c = self.sphere.centre();
-                if self.store.len() >= collector::OUTLIER_MIN_SAMPLES {
-                    let d = [y32[0] - c[0], y32[1] - c[1], y32[2] - c[2]];
-                    let r2 = self.sphere.radius_sq(c);
+                let dist_sq = |p: [f32; 3]| {
+                    let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+                    dot(&d, &d)
+                };
+                let smoothed = dist_sq(self.noise.position);
+                if !self.store.is_empty() && !spacing_sq.is_some_and(|s2| smoothed >= s2) {
+                    return Pushed::Still;
+                }
+                let r2 = self.sphere.radius_sq(c);
+                if self.store.len() >= collector::OUTLIER_MIN_SAMPLES
+                    && spacing_sq.is_some_and(|s2| r2 > s2)
+                {
                     let limit = collector::OUTLIER_RADII * collector::OUTLIER_RADII * r2;
-                    if !(dot(&d, &d) <= limit) {
+                    if !(dist_sq(y32) <= limit) {
                         return Pushed::Wild;
                     }
                 }
