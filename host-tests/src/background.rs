@@ -148,7 +148,7 @@ pub fn batch_on_buffer(bg: &Calibrator, truth: &Truth) -> Option<(f64, f64)> {
 
 /// A fresh calibrator with the default configuration.
 pub fn calibrator() -> Calibrator {
-    Background::new(BackgroundConfig::default())
+    Background::new(BackgroundConfig::default()).expect("the default configuration is valid")
 }
 
 /// Readings of one simulated run.

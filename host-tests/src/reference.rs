@@ -9,9 +9,10 @@
 //!   Here the explicit `n x 10` design matrix `D` is built and the fits use
 //!   SVD / QR factorisations of `D` itself (never the normal equations, except
 //!   where a test forms `S = D^T D` on purpose to cross-check).
-//! * The core solves ADC2 by BFGS on sufficient statistics. Here ADC2 is solved
-//!   in closed form as an ordinary least-squares regression of `d_i` on
-//!   `[h_i, 1]`, with an SVD solve on the explicit per-sample arrays.
+//! * The core solves ADC2 by a 4x4 Cholesky solve of the normal equations on
+//!   sufficient statistics. Here ADC2 is an ordinary least-squares
+//!   regression of `d_i` on `[h_i, 1]`, with an SVD solve on the explicit
+//!   per-sample arrays.
 //!
 //! Conventions (section 1): the model is `y = T h + b` with `|h| = 1`. Only
 //! `M = T^-T T^-1` and `b` are identified; the canonical `T^-1` is

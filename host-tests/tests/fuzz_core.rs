@@ -1344,7 +1344,19 @@ fn background_case(seed: u64, index: u64) -> Result<u64, String> {
         rng.any_f32()
     };
     config.stale_readings = rng.below(300) as u32;
-    let mut bg: Background<f32, [f64; 3], 96, 2> = Background::new(config);
+    // The configuration is validated once: a value that cannot be used
+    // is refused by name (an independent statement of the ranges).
+    let valid = (0.0..=180.0).contains(&config.min_angle_deg)
+        && config.stale_rms > 0.0
+        && config.stale_rms.is_finite()
+        && config.slice > 0
+        && config.min_cells <= 48;
+    let made: Result<Background<f32, [f64; 3], 96, 2>, _> = Background::new(config);
+    let mut bg = match (made, valid) {
+        (Ok(bg), true) => bg,
+        (Err(mag_cal_core::Error::InvalidConfig { .. }), false) => return Ok(1),
+        (made, _) => return Err(format!("{config:?} (valid: {valid}) gave {:?}", made.err())),
+    };
     let mut calls = 0u64;
     for _ in 0..3 {
         for s in &y {

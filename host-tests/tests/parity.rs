@@ -1,4 +1,4 @@
-//! Parity: the core (moments, small solves, BFGS) against the independent
+//! Parity: the core (moments, small solves) against the independent
 //! float64 reference (explicit design matrix, SVD/QR, closed-form ADC2).
 
 use host_tests::reference::{self, RefFit, RefLs};
@@ -123,11 +123,12 @@ fn i16_storage_matches_f64_input() {
     assert!(dm < 1e-9 && db < 1e-9, "{dm} {db}");
 }
 
-/// BFGS on the sufficient statistics against the closed-form minimiser
-/// computed by the reference from explicit artificial vectors, starting
-/// from the same LS fit. Also: BFGS needs only a handful of iterations.
+/// The core's solve on the sufficient statistics (normal equations, 4x4
+/// Cholesky) against the minimiser computed by the reference from explicit
+/// artificial vectors (SVD least squares), starting from the same LS fit.
+/// No solver iterates: the report counts none.
 #[test]
-fn bfgs_reaches_the_closed_form() {
+fn the_statistics_solve_reaches_the_closed_form() {
     for (seed, banded) in [(1, false), (2, true), (3, false)] {
         let y = scenario([0.05, 0.075, 0.1], banded, seed);
         let ls = reference::ls_fit(&y, RefLs::Ls9).unwrap();
@@ -138,8 +139,10 @@ fn bfgs_reaches_the_closed_form() {
             "seed {seed} band {banded}: dM {dm:.1e} db {db:.1e}, {} iterations",
             fit.report.iterations
         );
-        assert!(dm < 1e-6 && db < 1e-6);
-        assert!((1..=12).contains(&fit.report.iterations));
+        // 1e-15 to 3e-15 here (BFGS stopped at its 1e-6 step test was
+        // held to 1e-6).
+        assert!(dm < 1e-12 && db < 1e-12);
+        assert_eq!(fit.report.iterations, 0);
         // ADC2 moves the estimate away from the LS start (it is not a no-op).
         let m_ls: Matrix3<f64> = ls.m;
         assert!((fit.calibration.shape_matrix() - m_ls).amax() / m_ls.amax() > 1e-4);

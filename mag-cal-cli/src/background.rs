@@ -94,6 +94,9 @@ pub struct Readings {
     /// Not buffered: too close in direction to the last buffered reading
     /// (still used to watch the calibration).
     pub too_close: usize,
+    /// Not buffered, before the first calibration: the device lay within
+    /// the sensor's noise of the running centre (lying still).
+    pub still: usize,
     /// Not buffered: a glitch (a zero row, a component on the rails),
     /// not finite, or beyond the working precision.
     pub invalid: usize,
@@ -268,7 +271,8 @@ pub fn replay(samples: &[[f64; 3]], precision: Precision, steps: u32) -> Replay 
 fn replay_in<T: Real, S: Sample>(samples: &[S], precision: Precision, steps: u32) -> Replay {
     let config = BackgroundConfig::DEFAULT;
     // About 10 KB for f64 samples: on the heap.
-    let mut bg: Box<Calibrator<T, S>> = Box::new(Background::new(config));
+    let mut bg: Box<Calibrator<T, S>> =
+        Box::new(Background::new(config).expect("the default configuration is valid"));
     let mut log = Log::default();
     for (row, sample) in samples.iter().enumerate() {
         let pushed = bg.push(*sample);
@@ -373,7 +377,8 @@ fn not_calibrated(
     buffered: usize,
     cells: usize,
 ) -> String {
-    let rows = readings.stored + readings.too_close + readings.invalid + readings.wild;
+    let rows =
+        readings.stored + readings.too_close + readings.still + readings.invalid + readings.wild;
     let mut reason = match refused.iter().max_by_key(|r| r.last_row) {
         Some(last) => {
             let count: usize = refused.iter().map(|r| r.count).sum();
@@ -422,6 +427,7 @@ impl Log {
         match pushed {
             Pushed::Stored => r.stored += 1,
             Pushed::TooClose => r.too_close += 1,
+            Pushed::Still => r.still += 1,
             Pushed::Invalid => {
                 r.invalid += 1;
                 if r.invalid_rows.len() < ROWS_NAMED {
@@ -555,8 +561,9 @@ pub fn text(r: &Replay, source_name: &str, columns: &str, skipped: Option<&str>)
     );
     let rd = &r.readings;
     let mut readings = format!(
-        "{} rows: {} buffered, {} too close in direction to the last buffered",
-        r.rows, rd.stored, rd.too_close
+        "{} rows: {} buffered, {} too close in direction to the last buffered, \
+         {} lying still (before the first calibration, within the sensor's noise of the running centre)",
+        r.rows, rd.stored, rd.too_close, rd.still
     );
     for (n, rows, what) in [
         (rd.invalid, &rd.invalid_rows, "invalid (glitch, not finite)"),
@@ -787,7 +794,8 @@ mod tests {
                 assert_eq!(r.first_calibration, r.adoptions.first().map(|a| a.row));
                 assert_eq!(r.refits.adopted as usize, r.adoptions.len());
                 assert!(r.reason.is_none() && r.stale_from.is_empty());
-                assert_eq!(r.readings.stored + r.readings.too_close, 6000);
+                let rd = &r.readings;
+                assert_eq!(rd.stored + rd.too_close + rd.still, 6000);
             }
         }
     }

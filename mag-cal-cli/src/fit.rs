@@ -47,7 +47,8 @@ pub struct Outcome {
     pub soft_iron: [[f64; 3]; 3],
     /// Local field strength `det(W)^(-1/3)`, sensor units.
     pub field_strength: f64,
-    /// Quasi-Newton iterations (0 for `ls`).
+    /// BFGS iterations (`adc1`, `submle`; 0 for `ls`, `adc2` and
+    /// `adc2-iter`, solved in closed form).
     pub iterations: u32,
     /// Passes over the samples after the LS fit (for `ls` 1 with outlier handling, which judges
     /// the fit, else 0; 1 for `adc1`

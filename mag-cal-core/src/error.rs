@@ -47,11 +47,13 @@ pub enum Error {
     },
     /// A configuration value is invalid: a given noise covariance that is
     /// not finite, symmetric and positive definite (`noise_covariance`), or
-    /// a judging limit that is NaN or out of its range (the
-    /// [`Thresholds`](crate::Thresholds) field's name; see
-    /// [`Thresholds::validate`](crate::Thresholds::validate)).
+    /// a judging limit or another setting that is NaN or out of its range
+    /// (the field's name; see
+    /// [`Thresholds::validate`](crate::Thresholds::validate),
+    /// `BackgroundConfig::validate` and `PlanarConfig::validate`).
     InvalidConfig {
-        /// The field: `noise_covariance`, or a `Thresholds` field.
+        /// The field: `noise_covariance`, a `Thresholds` field, or a field
+        /// of the background or planar configuration.
         field: &'static str,
     },
     /// The samples lie near a plane (flat covariance): the third axis is not
@@ -174,7 +176,7 @@ impl fmt::Display for Error {
                 field: "noise_covariance",
             } => f.write_str("noise covariance is not finite, symmetric and positive definite"),
             Error::InvalidConfig { field } => {
-                write!(f, "the threshold `{field}` is NaN or out of its range")
+                write!(f, "the configuration value `{field}` is NaN or out of its range")
             }
             Error::Planar { flatness, limit } => write!(
                 f,

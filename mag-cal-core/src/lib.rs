@@ -77,8 +77,8 @@
 //!    exact in `f32`).
 //! 4. **Re-estimation** ([`Method`]): ADC2 minimises
 //!    `sum |x_i - b - T h_i|^2` over `T` and `b` (linear in them, so exactly
-//!    quadratic: BFGS with the exact line search on the statistics, no
-//!    further pass). Iterated ADC2 repeats steps 3-4 from each new estimate
+//!    quadratic: solved in closed form on the statistics, a 4x4 Cholesky
+//!    solve, no further pass). Iterated ADC2 repeats steps 3-4 from each new estimate
 //!    to the fixed point (Anderson-accelerated, a pass each); ADC1 weights
 //!    the residuals by the noise covariance and has ADC2's minimiser;
 //!    subMLE (the paper's baseline) minimises the first-order likelihood

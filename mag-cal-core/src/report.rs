@@ -16,7 +16,9 @@ pub struct Report<T: Real> {
     pub method: Method,
     /// The LS variant of step 1.
     pub ls: LsVariant,
-    /// Quasi-Newton iterations, summed over all solves (0 for [`Method::Ls`]).
+    /// BFGS iterations, summed over all solves: ADC1's and subMLE's; 0 for
+    /// [`Method::Ls`], [`Method::Adc2`] and [`Method::Adc2Iterated`], whose
+    /// solves are closed form (their work is in `passes`).
     pub iterations: u32,
     /// Passes over the samples after the LS fit: 1 for ADC1 and ADC2, one
     /// per fixed-point step for iterated ADC2, one per cost evaluation for

@@ -238,7 +238,7 @@ typedef struct {
   uint32_t ls;
   // Outlier handling (true by default).
   bool robust;
-  // Iteration cap of each quasi-Newton solve (50).
+  // Iteration cap of each BFGS solve, ADC1's and subMLE's (50).
   uint32_t max_iterations;
   // Pass cap of iterated ADC2 (50).
   uint32_t max_passes;
@@ -267,7 +267,8 @@ typedef struct {
 typedef struct {
   // The calibration.
   MagcalCalibration calibration;
-  // Quasi-Newton iterations.
+  // BFGS iterations (ADC1 and subMLE; 0 for LS, ADC2 and iterated ADC2,
+  // solved in closed form).
   uint32_t iterations;
   // Passes over the samples after the LS fit.
   uint32_t passes;

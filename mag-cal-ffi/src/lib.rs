@@ -727,7 +727,7 @@ pub struct MagcalConfig {
     pub ls: u32,
     /// Outlier handling (true by default).
     pub robust: bool,
-    /// Iteration cap of each quasi-Newton solve (50).
+    /// Iteration cap of each BFGS solve, ADC1's and subMLE's (50).
     pub max_iterations: u32,
     /// Pass cap of iterated ADC2 (50).
     pub max_passes: u32,
@@ -841,7 +841,8 @@ impl<T: Real> From<&Calibration<T>> for MagcalCalibration {
 pub struct MagcalResult {
     /// The calibration.
     pub calibration: MagcalCalibration,
-    /// Quasi-Newton iterations.
+    /// BFGS iterations (ADC1 and subMLE; 0 for LS, ADC2 and iterated ADC2,
+    /// solved in closed form).
     pub iterations: u32,
     /// Passes over the samples after the LS fit.
     pub passes: u32,

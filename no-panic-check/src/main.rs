@@ -403,8 +403,11 @@ fn collector<S: Sample, T: Real>(samples: &'static RawSlice<S>, scalars: &'stati
 #[inline(never)]
 fn background<S: Sample, T: Real>(samples: &'static RawSlice<S>, scalars: &'static Scalars<T>) {
     let config = opaque(&mag_cal_core::background::BackgroundConfig::DEFAULT);
-    let mut bg: mag_cal_core::background::Background<T, S, 96, 2> =
+    let made: Result<mag_cal_core::background::Background<T, S, 96, 2>, _> =
         mag_cal_core::background::Background::new(config);
+    let Ok(mut bg) = made else {
+        return;
+    };
     for _ in 0..opaque(&scalars.pushes) {
         for sample in samples.get() {
             keep(bg.push(*sample));

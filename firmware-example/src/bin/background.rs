@@ -17,7 +17,7 @@ use embedded_hal::i2c::I2c;
 use lsm303agr::{interface::I2cInterface, mode::MagContinuous, Lsm303agr};
 use lsm303agr::{MagMode, MagOutputDataRate};
 use mag_cal_core::background::{Background, BackgroundConfig, Stepped};
-use mag_cal_core::Calibration;
+use mag_cal_core::{Calibration, Error};
 use nalgebra::{Matrix3, Vector3};
 
 use firmware_example::{platform, Truth};
@@ -86,9 +86,8 @@ fn main() -> ! {
         READINGS, JUMP_AT, bound, BOUND_IN_NOISE, noise
     );
 
-    let calibrator =
-        cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT));
-    let Some(bg) = calibrator else {
+    let calibrator = cortex_m::singleton!(: Result<Calibrator, Error> = Background::new(BackgroundConfig::DEFAULT));
+    let Some(Ok(bg)) = calibrator else {
         platform::exit(false)
     };
     bench.begin_ordinary_use();

@@ -49,8 +49,8 @@
 //!   `moments` (the LS moment pass), `scatter` (the 10x10 scatter from the
 //!   moments), `ls9-solve` (9x9 Cholesky and the quadric to ellipsoid step,
 //!   which includes a 3x3 symmetric eigen decomposition), `adc2-stats` (the
-//!   artificial-data pass), `adc2-solve` (BFGS on the statistics),
-//!   `adc2-run` (`adc2-stats` + `adc2-solve` + the canonical square root),
+//!   artificial-data pass), `adc2-solve` (the closed-form solve on the
+//!   statistics, with the 4x4 Gram check), `adc2-run` (`adc2-stats` + `adc2-solve` + the canonical square root),
 //!   and proxies for private pieces: `calibration-new` (`Calibration::new`:
 //!   one 3x3 symmetric eigen decomposition, as the checks and the canonical
 //!   forms do several, plus a determinant and a cube root), `rsqrt` (1000 calls of the core's
@@ -519,7 +519,7 @@ fn main() -> ! {
         platform::exit(false)
     };
     stage(&timer, "adc2-solve", SMALL_REPEATS, || {
-        adc2::solve(black_box(&stats), &ls.t, &ls.centre, 50)
+        adc2::solve(black_box(&stats), &ls.t, &ls.centre)
     });
     let cfg = config(Method::Adc2);
     stages += stage(&timer, "adc2-run", 1, || {
@@ -576,7 +576,7 @@ fn background(timer: &Timer) -> bool {
     use firmware_example::sim::Motion;
     use mag_cal_core::background::{Background, BackgroundConfig, Stepped};
     type Calibrator = Background<f32, [i16; 3], 288, 6>;
-    let Some(bg) = cortex_m::singleton!(: Calibrator = Background::new(BackgroundConfig::DEFAULT))
+    let Some(Ok(bg)) = cortex_m::singleton!(: Result<Calibrator, mag_cal_core::Error> = Background::new(BackgroundConfig::DEFAULT))
     else {
         return false;
     };

@@ -427,7 +427,8 @@ fn render(
          `calibrate` (all passes: validation, moments, the method, the report's radial RMS); \
          \"/ ADC2\": median over the runs of the time ratio to ADC2 on the same samples. \
          Passes: passes over the samples after the LS fit (`report.passes`); iterations: \
-         quasi-Newton iterations (`report.iterations`). Medians.\n"
+         BFGS iterations (`report.iterations`; ADC2 and iterated ADC2 solve in closed form, \
+         0). Medians.\n"
     );
     for s in table {
         let _ = writeln!(
@@ -609,8 +610,8 @@ fn render(
          - **Timing.** Rust, `f64`, n = 1000, against MATLAB. Every method first pays the LS9 \
            fit (validation, the 35 moments, and the report's radial RMS: {ls_us:.0} us median \
            in B, of which the moments pass alone takes {moments_us:.0} us, {:.0} ns per sample \
-           for about 120 flops). ADC2 adds one pass and a BFGS on 4x4 statistics (O(1) per \
-           iteration): {:.0} us. subMLE adds one O(n) pass per cost evaluation (median \
+           for about 120 flops). ADC2 adds one pass and a 4x4 Cholesky solve on the \
+           statistics: {:.0} us. subMLE adds one O(n) pass per cost evaluation (median \
            {sub_passes:.0} in B, about {per_eval_ns:.0} ns per sample each): {:.0} us. Beyond \
            the shared LS9 fit, subMLE therefore costs {bmin:.0}-{bmax:.0}x ADC2, the order of \
            the paper's 43x; over the whole call {tmin:.1}-{tmax:.1}x, because the shared \

@@ -38,7 +38,7 @@
 //! use mag_cal_core::background::{Background, BackgroundConfig};
 //!
 //! // 48 cells of 4 samples; f32.
-//! let mut bg: Background<f32, [f32; 3], 192, 4> = Background::new(BackgroundConfig::default());
+//! let mut bg: Background<f32, [f32; 3], 192, 4> = Background::new(BackgroundConfig::default())?;
 //! for k in 0..6000 {
 //!     // A device turned slowly through most orientations.
 //!     let z = (k as f32 * 0.0021).sin();
@@ -51,6 +51,7 @@
 //! let cal = bg.calibration().expect("calibrated in the background");
 //! assert!((cal.hard_iron()[0] - 250.0).abs() < 1.0);
 //! assert!(!bg.is_stale());
+//! # Ok::<(), mag_cal_core::Error>(())
 //! ```
 
 use crate::tuning::OUTLIER_CUT;
@@ -140,6 +141,36 @@ impl BackgroundConfig {
     };
 }
 
+impl BackgroundConfig {
+    /// `Ok` when every value can be used, else the first that cannot:
+    /// [`Error::InvalidConfig`] naming the field (a NaN, an angle outside
+    /// 0-180 degrees, a `stale_rms` that is not positive and finite, a
+    /// `slice` of 0, more `min_cells` than there are cells ([`CELLS`]),
+    /// or one of the [`Thresholds`], [`Thresholds::validate`]).
+    ///
+    /// ```
+    /// use mag_cal_core::background::BackgroundConfig;
+    /// use mag_cal_core::Error;
+    /// assert_eq!(BackgroundConfig::DEFAULT.validate(), Ok(()));
+    /// let mut bad = BackgroundConfig::DEFAULT;
+    /// bad.slice = 0;
+    /// assert_eq!(bad.validate(), Err(Error::InvalidConfig { field: "slice" }));
+    /// ```
+    pub fn validate(&self) -> Result<(), Error> {
+        quality::check("min_angle_deg", self.min_angle_deg, 0.0, 180.0)?;
+        if !(self.stale_rms > 0.0 && self.stale_rms.is_finite()) {
+            return Err(Error::InvalidConfig { field: "stale_rms" });
+        }
+        if self.slice == 0 {
+            return Err(Error::InvalidConfig { field: "slice" });
+        }
+        if self.min_cells > CELLS {
+            return Err(Error::InvalidConfig { field: "min_cells" });
+        }
+        self.thresholds.validate()
+    }
+}
+
 impl Default for BackgroundConfig {
     fn default() -> Self {
         Self::DEFAULT
@@ -161,6 +192,12 @@ pub enum Pushed {
     Invalid,
     /// Not buffered: far off the calibrated sphere (a wild reading).
     Wild,
+    /// Not buffered, before the first calibration: the device, smoothed
+    /// over its noise, lies within the sensor's noise spacing
+    /// ([`crate::device::collector::NOISE_SPACING`]) of the running
+    /// centre, as a device lying still does (or while the noise is learnt,
+    /// the first few readings after the first).
+    Still,
 }
 
 /// What [`Background::step`] did.
@@ -343,6 +380,8 @@ pub struct Background<T: Real, S: Sample, const N: usize, const K: usize> {
     head: [u8; CELLS],
     sphere: CentreFit,
     last_direction: Option<[f32; 3]>,
+    /// The sensor's noise, learnt from the readings before a calibration.
+    noise: collector::NoiseGate,
     recent: heapless::Vec<S, RECENT>,
     recent_next: usize,
     recent_direction: Option<[f32; 3]>,
@@ -361,28 +400,16 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
         "Background<_, _, N, K> needs N == 48 * K, 0 < K < 256"
     );
 
-    /// An empty calibrator. A configuration value that is not positive and
-    /// finite where it must be (the angle may be 0) is replaced by its
-    /// default.
-    pub fn new(config: BackgroundConfig) -> Self {
+    /// An empty calibrator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] when a value of `config` cannot be used
+    /// ([`BackgroundConfig::validate`]).
+    pub fn new(config: BackgroundConfig) -> Result<Self, Error> {
         let () = Self::SHAPE;
-        let d = BackgroundConfig::DEFAULT;
-        let config = BackgroundConfig {
-            min_angle_deg: if config.min_angle_deg >= 0.0 && config.min_angle_deg <= 180.0 {
-                config.min_angle_deg
-            } else {
-                d.min_angle_deg
-            },
-            stale_rms: if config.stale_rms > 0.0 && config.stale_rms.is_finite() {
-                config.stale_rms
-            } else {
-                d.stale_rms
-            },
-            slice: config.slice.max(1),
-            ..config
-        };
+        config.validate()?;
         let chord = 2.0 * libm::sinf(0.5 * config.min_angle_deg.to_radians());
-        Self {
+        Ok(Self {
             config,
             min_chord_sq: chord * chord,
             store: heapless::Vec::new(),
@@ -393,6 +420,7 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             head: [0; CELLS],
             sphere: CentreFit::EMPTY,
             last_direction: None,
+            noise: collector::NoiseGate::EMPTY,
             recent: heapless::Vec::new(),
             recent_next: 0,
             recent_direction: None,
@@ -403,15 +431,18 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
             watch: Watch::CALM,
             last_offsets_try: 0,
             counters: Counters::default(),
-        }
+        })
     }
 
     /// A calibrator that starts from a stored calibration (its fit error
     /// as given, e.g. that of the fit's report).
-    pub fn with_calibration(config: BackgroundConfig, current: Current<T>) -> Self {
-        let mut bg = Self::new(config);
+    ///
+    /// # Errors
+    /// As [`Background::new`].
+    pub fn with_calibration(config: BackgroundConfig, current: Current<T>) -> Result<Self, Error> {
+        let mut bg = Self::new(config)?;
         bg.current = Some(current);
-        bg
+        Ok(bg)
     }
 
     /// The calibration in use, if any.
@@ -507,12 +538,35 @@ impl<T: Real, S: Sample, const N: usize, const K: usize> Background<T, S, N, K> 
                 u
             }
             None => {
+                // Before a calibration, directions are taken from the
+                // running sphere's centre. A device lying still puts that
+                // centre inside its noise, which then points every way: its
+                // readings would fill every cell, and the motion after them
+                // would be wild to that tiny sphere (6 000 still readings
+                // at 0.2 % noise: all 48 cells filled, never calibrated;
+                // `still_periods_change_nothing_in_the_background`). So a
+                // reading is buffered only when the device, smoothed over
+                // its noise, lies beyond the noise spacing of the collector
+                // ([`collector::NOISE_SPACING`]) from that centre, and the
+                // wild test waits for a sphere larger than the spacing. A
+                // turning device is a field strength from the centre, far
+                // beyond the spacing (30 % of the field at 3 % noise).
+                let spacing_sq = self.noise.take(y32).map(|d| d * d);
                 let c = self.sphere.centre();
-                if self.store.len() >= collector::OUTLIER_MIN_SAMPLES {
-                    let d = [y32[0] - c[0], y32[1] - c[1], y32[2] - c[2]];
-                    let r2 = self.sphere.radius_sq(c);
+                let dist_sq = |p: [f32; 3]| {
+                    let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+                    dot(&d, &d)
+                };
+                let smoothed = dist_sq(self.noise.position);
+                if !self.store.is_empty() && !spacing_sq.is_some_and(|s2| smoothed >= s2) {
+                    return Pushed::Still;
+                }
+                let r2 = self.sphere.radius_sq(c);
+                if self.store.len() >= collector::OUTLIER_MIN_SAMPLES
+                    && spacing_sq.is_some_and(|s2| r2 > s2)
+                {
                     let limit = collector::OUTLIER_RADII * collector::OUTLIER_RADII * r2;
-                    if !(dot(&d, &d) <= limit) {
+                    if !(dist_sq(y32) <= limit) {
                         return Pushed::Wild;
                     }
                 }
@@ -1075,7 +1129,7 @@ fn adc_end<T: Real>(
     pass: &AdcPass<T>,
 ) -> Result<RefitPass<T>, Error> {
     let stats = pass.stats(&start.w)?;
-    let sol = adc2::solve_closed_form(&stats, &start.t, &start.centre)?;
+    let sol = adc2::solve(&stats, &start.t, &start.centre)?;
     let est = Estimate {
         centre: sol.centre,
         w: sym_inv_sqrt(&(sol.t * sol.t.transpose()))?,
@@ -1152,7 +1206,8 @@ mod tests {
         let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig {
             min_angle_deg: 0.0,
             ..BackgroundConfig::DEFAULT
-        });
+        })
+        .unwrap();
         for round in 0..2000 {
             let v = [
                 rng.symmetric() as f32,
@@ -1171,8 +1226,73 @@ mod tests {
     }
 
     #[test]
+    fn a_configuration_that_cannot_be_used_is_refused_by_name() {
+        let d = BackgroundConfig::DEFAULT;
+        let cases = [
+            (
+                BackgroundConfig {
+                    min_angle_deg: -1.0,
+                    ..d
+                },
+                "min_angle_deg",
+            ),
+            (
+                BackgroundConfig {
+                    min_angle_deg: f32::NAN,
+                    ..d
+                },
+                "min_angle_deg",
+            ),
+            (
+                BackgroundConfig {
+                    stale_rms: 0.0,
+                    ..d
+                },
+                "stale_rms",
+            ),
+            (
+                BackgroundConfig {
+                    stale_rms: f32::INFINITY,
+                    ..d
+                },
+                "stale_rms",
+            ),
+            (BackgroundConfig { slice: 0, ..d }, "slice"),
+            (
+                BackgroundConfig {
+                    min_cells: CELLS + 1,
+                    ..d
+                },
+                "min_cells",
+            ),
+            (
+                BackgroundConfig {
+                    thresholds: Thresholds {
+                        refuse_coverage: f32::NAN,
+                        ..Thresholds::DEFAULT
+                    },
+                    ..d
+                },
+                "refuse_coverage",
+            ),
+        ];
+        for (config, field) in cases {
+            let made: Result<Background<f32, [f32; 3], 96, 2>, _> = Background::new(config);
+            assert_eq!(made.err(), Some(Error::InvalidConfig { field }));
+        }
+        let edge = BackgroundConfig {
+            min_angle_deg: 0.0,
+            min_cells: CELLS,
+            slice: 1,
+            ..d
+        };
+        assert!(Background::<f32, [f32; 3], 96, 2>::new(edge).is_ok());
+    }
+
+    #[test]
     fn a_full_cell_replaces_its_oldest_sample() {
-        let mut bg: Background<f32, [f32; 3], 96, 2> = Background::new(BackgroundConfig::DEFAULT);
+        let mut bg: Background<f32, [f32; 3], 96, 2> =
+            Background::new(BackgroundConfig::DEFAULT).unwrap();
         for k in 0..5 {
             bg.store_in([k as f32, 0.0, 0.0], 3);
         }

@@ -400,13 +400,13 @@ const NOISE_CLIP: f32 = 4.0;
 /// of a device lying still and about zero for one that turns, however
 /// coarsely sampled (steps up to 90 deg of a steady turn).
 #[derive(Clone, Copy, Debug)]
-struct NoiseGate {
+pub(crate) struct NoiseGate {
     /// The last reading.
     last: [f32; 3],
     /// The step to it from the one before.
     step: [f32; 3],
     /// The readings, smoothed ([`POSITION_WEIGHT`]).
-    position: [f32; 3],
+    pub(crate) position: [f32; 3],
     /// Readings taken (saturating).
     seen: u8,
     /// Mean length of the second difference `d_k - d_(k-1)`: the scale
@@ -423,7 +423,7 @@ struct NoiseGate {
 }
 
 impl NoiseGate {
-    const EMPTY: NoiseGate = NoiseGate {
+    pub(crate) const EMPTY: NoiseGate = NoiseGate {
         last: [0.0; 3],
         step: [0.0; 3],
         position: [0.0; 3],
@@ -437,7 +437,7 @@ impl NoiseGate {
     /// Takes a (finite) reading; returns how far the smoothed position
     /// must have moved since the last sample stored for the reading to be
     /// new, or `None` while the noise is not known yet.
-    fn take(&mut self, y: [f32; 3]) -> Option<f32> {
+    pub(crate) fn take(&mut self, y: [f32; 3]) -> Option<f32> {
         self.seen = self.seen.saturating_add(1);
         if self.seen == 1 {
             (self.last, self.position) = (y, y);

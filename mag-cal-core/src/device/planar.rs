@@ -195,6 +195,29 @@ impl PlanarConfig {
     }
 }
 
+impl PlanarConfig {
+    /// `Ok` when the configuration can be used, else
+    /// [`FitError::InvalidConfig`] naming the first value that cannot: an
+    /// `up` axis that is not finite or is zero, or a limit
+    /// ([`PlanarThresholds::validate`]).
+    ///
+    /// ```
+    /// use mag_cal_core::planar::PlanarConfig;
+    /// use mag_cal_core::Error;
+    /// assert_eq!(PlanarConfig::DEFAULT.validate(), Ok(()));
+    /// let bad = PlanarConfig::with_up([0.0, f64::NAN, 1.0]);
+    /// assert_eq!(bad.validate(), Err(Error::InvalidConfig { field: "up" }));
+    /// ```
+    pub fn validate(&self) -> Result<(), FitError> {
+        let [x, y, z] = self.up;
+        let norm_sq = x * x + y * y + z * z;
+        if !(norm_sq > 0.0 && norm_sq.is_finite()) {
+            return Err(FitError::InvalidConfig { field: "up" });
+        }
+        self.thresholds.validate()
+    }
+}
+
 impl Default for PlanarConfig {
     fn default() -> Self {
         Self::DEFAULT
@@ -365,14 +388,17 @@ pub struct PlanarFit<T: Real> {
 /// about one axis (see the module docs).
 ///
 /// # Errors
-/// The rules' and screening's refusals of the three-dimensional fit
-/// ([`Error::Fit`]: too few samples, all equal, ...), and from [`judge`]:
+/// A configuration that cannot be used ([`PlanarConfig::validate`], as
+/// [`Error::Fit`]), the rules' and screening's refusals of the
+/// three-dimensional fit ([`Error::Fit`]: too few samples, all equal, ...),
+/// and from [`judge`]:
 /// [`Error::NotPlanar`], [`Error::NoEllipse`], [`Error::ShortArc`], too
 /// many outliers.
 pub fn calibrate_planar<T: Real, S: Sample>(
     samples: &[S],
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
+    config.validate()?;
     let scanned = scan::<T, S>(samples, true)?;
     let screening = match screen(samples, &scanned) {
         Ok(s) => s,
@@ -907,5 +933,57 @@ mod tests {
         assert!((c2[0] - cx).abs() < 1e-12 && (c2[1] - cy).abs() < 1e-12);
         assert!((w2[0][0] - 0.5).abs() < 1e-12 && (w2[1][1] - 1.0).abs() < 1e-12);
         assert!(w2[0][1].abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_configuration_that_cannot_be_used_is_refused_by_name() {
+        // A level turn the defaults accept.
+        let ring: [[f32; 3]; 120] = core::array::from_fn(|i| {
+            let a = i as f32 * core::f32::consts::TAU / 120.0;
+            [
+                30.0 + 40.0 * libm::cosf(a),
+                -5.0 + 35.0 * libm::sinf(a),
+                20.0,
+            ]
+        });
+        assert!(calibrate_planar::<f32, _>(&ring, &PlanarConfig::DEFAULT).is_ok());
+        let cases: [(PlanarConfig, &str); 5] = [
+            (PlanarConfig::with_up([0.0; 3]), "up"),
+            (PlanarConfig::with_up([f64::INFINITY, 0.0, 0.0]), "up"),
+            (
+                PlanarConfig {
+                    thresholds: PlanarThresholds {
+                        refuse_fit_error: f32::NAN,
+                        ..PlanarThresholds::DEFAULT
+                    },
+                    ..PlanarConfig::DEFAULT
+                },
+                "refuse_fit_error",
+            ),
+            (
+                PlanarConfig {
+                    thresholds: PlanarThresholds {
+                        refuse_outlier_share: 1.5,
+                        ..PlanarThresholds::DEFAULT
+                    },
+                    ..PlanarConfig::DEFAULT
+                },
+                "refuse_outlier_share",
+            ),
+            (
+                PlanarConfig {
+                    thresholds: PlanarThresholds {
+                        min_sectors: SECTORS + 1,
+                        ..PlanarThresholds::DEFAULT
+                    },
+                    ..PlanarConfig::DEFAULT
+                },
+                "min_sectors",
+            ),
+        ];
+        for (config, field) in cases {
+            let got = calibrate_planar::<f32, _>(&ring, &config).map(|_| ());
+            assert_eq!(got, Err(Error::Fit(FitError::InvalidConfig { field })));
+        }
     }
 }

@@ -46,6 +46,30 @@ impl PlanarThresholds {
     };
 }
 
+impl PlanarThresholds {
+    /// `Ok` when every limit can be used, else [`FitError::InvalidConfig`]
+    /// naming the first that cannot (a NaN, a share or flatness outside
+    /// 0-1, a negative fit error, more sectors than
+    /// [`crate::planar::SECTORS`]).
+    pub fn validate(&self) -> Result<(), FitError> {
+        use crate::judge::quality::check;
+        check("refuse_not_planar", self.refuse_not_planar, 0.0, 1.0)?;
+        check(
+            "refuse_fit_error",
+            self.refuse_fit_error,
+            0.0,
+            f32::INFINITY,
+        )?;
+        check("refuse_outlier_share", self.refuse_outlier_share, 0.0, 1.0)?;
+        if self.min_sectors > crate::device::planar::SECTORS {
+            return Err(FitError::InvalidConfig {
+                field: "min_sectors",
+            });
+        }
+        Ok(())
+    }
+}
+
 impl Default for PlanarThresholds {
     fn default() -> Self {
         Self::DEFAULT

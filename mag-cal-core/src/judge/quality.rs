@@ -195,7 +195,7 @@ impl Thresholds {
 /// `Ok` when `value` lies in `lo..=hi` (NaN does not), else the refusal
 /// naming `field`.
 #[inline(always)]
-fn check(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), Error> {
+pub(crate) fn check(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), Error> {
     if value >= lo && value <= hi {
         Ok(())
     } else {

@@ -1,9 +1,11 @@
-//! Step 4 of Algorithm 1: a fixed-size BFGS quasi-Newton solver, and the
-//! fixed-point accelerator of iterated ADC2.
+//! Step 4 of Algorithm 1 for the iterative methods: a fixed-size BFGS
+//! quasi-Newton solver (ADC1 and subMLE; compiled with their features),
+//! and the fixed-point accelerator of iterated ADC2 (with its feature).
+//! ADC2 itself needs neither: its cost is exactly quadratic and solved in
+//! closed form ([`crate::steps::methods::adc2::solve`]).
 //!
 //! Parameters live in a stack vector `SVector<T, N>`, the inverse-Hessian
-//! approximation in an `N x N` stack matrix; nothing is allocated. Every
-//! method of the crate minimises its objective with this one solver.
+//! approximation in an `N x N` stack matrix; nothing is allocated.
 //!
 //! Line search: an objective that is exactly quadratic reports its
 //! curvature `d^T H d` along a direction, and the step is the closed-form
@@ -23,9 +25,12 @@
 use nalgebra::SVector;
 
 use crate::numerics::linalg::dot;
-use crate::{Error, Real};
+#[cfg(any(feature = "adc1", feature = "submle"))]
+use crate::Error;
+use crate::Real;
 
 /// A smooth objective over `N` parameters.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 pub trait Objective<T: Real, const N: usize> {
     /// Cost and gradient at `x`.
     fn cost_grad(&self, x: &SVector<T, N>) -> (T, SVector<T, N>);
@@ -38,6 +43,7 @@ pub trait Objective<T: Real, const N: usize> {
 }
 
 /// Stop criteria and the iteration cap.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BfgsOptions<T> {
     /// Relative step tolerance.
@@ -49,6 +55,7 @@ pub struct BfgsOptions<T> {
 }
 
 /// Which criterion stopped the solver.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Stop {
@@ -59,6 +66,7 @@ pub enum Stop {
 }
 
 /// The minimiser found.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Minimum<T: Real, const N: usize> {
     /// Parameters.
@@ -72,8 +80,10 @@ pub struct Minimum<T: Real, const N: usize> {
 }
 
 /// Backtracking halvings before the line search gives up.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 const MAX_BACKTRACK: u32 = 60;
 /// Armijo sufficient-decrease constant.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 const ARMIJO: f64 = 1e-4;
 
 /// The components of a stack vector.
@@ -89,6 +99,7 @@ fn arr_mut<T: Real, const N: usize>(v: &mut SVector<T, N>) -> &mut [T; N] {
 }
 
 /// `max |a_i|` (NaN components are skipped, as in nalgebra's `amax`).
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[inline]
 fn amax<T: Real, const N: usize>(a: &[T; N]) -> T {
     a.iter().fold(T::zero(), |m, &v| {
@@ -102,6 +113,7 @@ fn amax<T: Real, const N: usize>(a: &[T; N]) -> T {
 }
 
 /// `x + alpha d`.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[inline]
 fn along<T: Real, const N: usize>(x: &SVector<T, N>, d: &SVector<T, N>, alpha: T) -> SVector<T, N> {
     let mut p = *x;
@@ -112,6 +124,7 @@ fn along<T: Real, const N: usize>(x: &SVector<T, N>, d: &SVector<T, N>, alpha: T
 }
 
 /// Sets `h` to the identity.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 fn set_identity<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
     for (i, row) in h.iter_mut().enumerate() {
         for (j, v) in row.iter_mut().enumerate() {
@@ -122,6 +135,7 @@ fn set_identity<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
 
 /// Copies the lower triangle of `h` onto the upper one.
 // Triangular loops: both indices are below `N`.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 #[allow(clippy::needless_range_loop)]
 fn mirror_lower<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
     for i in 0..N {
@@ -132,6 +146,7 @@ fn mirror_lower<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
 }
 
 /// Minimises `f` from `x0` with BFGS.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
     f: &F,
     x0: SVector<T, N>,
@@ -260,6 +275,7 @@ pub fn bfgs<T: Real, F: Objective<T, N>, const N: usize>(
 /// quadratic through `f(0)`, `f'(0)` and the rejected trial, kept within
 /// `[0.1, 0.5]` of the previous step. Returns the step length with the cost
 /// and gradient there, or `None` when no decrease is found.
+#[cfg(any(feature = "adc1", feature = "submle"))]
 fn backtrack<T: Real, F: Objective<T, N>, const N: usize>(
     f: &F,
     x: &SVector<T, N>,
@@ -467,9 +483,13 @@ impl<T: Real, const D: usize, const M: usize> Anderson<T, D, M> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{SMatrix, Vector2, Vector4};
+    #[cfg(any(feature = "adc1", feature = "submle"))]
+    use nalgebra::Vector2;
+    use nalgebra::{SMatrix, Vector4};
 
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     struct Rosenbrock;
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     impl Objective<f64, 2> for Rosenbrock {
         fn cost_grad(&self, x: &Vector2<f64>) -> (f64, Vector2<f64>) {
             let (a, b) = (x[0], x[1]);
@@ -482,6 +502,7 @@ mod tests {
         }
     }
 
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     #[test]
     fn minimises_rosenbrock_with_backtracking() {
         let opts = BfgsOptions {
@@ -494,10 +515,12 @@ mod tests {
     }
 
     /// f(x) = 1/2 x^T A x - b^T x with a known minimiser A^-1 b.
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     struct Quadratic {
         a: SMatrix<f64, 4, 4>,
         b: Vector4<f64>,
     }
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     impl Objective<f64, 4> for Quadratic {
         fn cost_grad(&self, x: &Vector4<f64>) -> (f64, Vector4<f64>) {
             let ax = self.a * x;
@@ -508,6 +531,7 @@ mod tests {
         }
     }
 
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     #[test]
     fn exact_line_search_terminates_on_a_quadratic() {
         let l = SMatrix::<f64, 4, 4>::from_fn(|i, j| {
@@ -534,6 +558,7 @@ mod tests {
         assert!(m.iterations <= 5, "{} iterations", m.iterations);
     }
 
+    #[cfg(any(feature = "adc1", feature = "submle"))]
     #[test]
     fn cap_is_reported() {
         let opts = BfgsOptions {

@@ -87,12 +87,6 @@ impl CentreFit {
         finite.then_some(f)
     }
 
-    /// Whether any sample is in the sums.
-    #[cfg(feature = "robust")]
-    pub(crate) fn has_samples(&self) -> bool {
-        self.n > 0.0
-    }
-
     /// Mean squared distance of the samples from `centre` (sensor units):
     /// `mean|x - c|^2 = mean(q) - 2 c.mean(x) + |c|^2` with `c` relative to
     /// the origin.

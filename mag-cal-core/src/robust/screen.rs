@@ -40,8 +40,7 @@
 //! Cortex-M4F); nothing is sorted or stored per sample.
 
 use crate::numerics::histogram::{AxisHistograms, LogHistogram, Place, AXIS_BINS};
-use crate::numerics::linalg::{larger, smaller};
-use crate::numerics::sphere::CentreFit;
+use crate::numerics::linalg::{cholesky_in_place, cholesky_solve, larger, smaller};
 use crate::sample::Sample;
 use crate::steps::methods::MAD_TO_SIGMA;
 use crate::steps::moments::BLOCK;
@@ -318,7 +317,7 @@ fn shell<T: Real, S: Sample>(
 /// The algebraic sphere fit's centre and its median distance, or `None`
 /// when it has none; and the passes it took (two, subsampled).
 ///
-/// Kasa's fit (the running sphere fit of [`crate::numerics::sphere`]) over
+/// Kasa's fit (algebraic: linear least squares, normal equations) over
 /// the subsampled rows within `RECENTRE_RADIUS`` m` of the median centre
 /// `c`, in units of `m` about `c` (so that `f32` suffices whatever the
 /// offset): exact for samples on any part of a sphere, however unevenly
@@ -335,29 +334,37 @@ fn recentre<T: Real, S: Sample>(
     every: usize,
 ) -> (Option<([T; 3], T)>, u32) {
     let inv_m = T::one() / m;
-    let mut fit = CentreFit::EMPTY;
-    let limit_sq = RECENTRE_RADIUS * RECENTRE_RADIUS;
+    // Normal equations of `|x|^2 = 2 a . x + d` over `z = [x, 1]`, `x`
+    // the row about `c` in units of `m` (within `RECENTRE_RADIUS`, so the
+    // sums stay small in `f32`): `(sum z z^T) [2a, d] = sum z |x|^2`.
+    let mut zz = [[T::zero(); 4]; 4];
+    let mut zq = [T::zero(); 4];
+    let limit_sq = T::from_single(RECENTRE_RADIUS * RECENTRE_RADIUS);
     visit(samples, BLOCK, gate, every, &mut |y| {
-        let x = [
-            ((y[0] - c[0]) * inv_m).to_single(),
-            ((y[1] - c[1]) * inv_m).to_single(),
-            ((y[2] - c[2]) * inv_m).to_single(),
+        let z = [
+            (y[0] - c[0]) * inv_m,
+            (y[1] - c[1]) * inv_m,
+            (y[2] - c[2]) * inv_m,
+            T::one(),
         ];
-        if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] <= limit_sq {
-            if let Some(f) = fit.with(x) {
-                fit = f;
+        let q = z[0] * z[0] + z[1] * z[1] + z[2] * z[2];
+        if q <= limit_sq {
+            for (row, &zi) in zz.iter_mut().zip(&z) {
+                for (e, &zj) in row.iter_mut().zip(&z) {
+                    *e += zi * zj;
+                }
+            }
+            for (e, &zi) in zq.iter_mut().zip(&z) {
+                *e += zi * q;
             }
         }
     });
-    let a = fit.centre();
-    if !fit.has_samples() || !a.iter().all(|v| v.is_finite()) {
+    if !cholesky_in_place(&mut zz) {
         return (None, 1);
     }
-    let centre = [
-        c[0] + T::from_single(a[0]) * m,
-        c[1] + T::from_single(a[1]) * m,
-        c[2] + T::from_single(a[2]) * m,
-    ];
+    let [a0, a1, a2, _] = cholesky_solve(&zz, &zq);
+    let half = T::lit(0.5) * m;
+    let centre = [c[0] + a0 * half, c[1] + a1 * half, c[2] + a2 * half];
     let mut dist = LogHistogram::new();
     distances(samples, gate, centre, inv_m, every, false, &mut dist);
     let r = dist

@@ -78,7 +78,7 @@ fn adc2_step<T: Real, S: Sample>(
     let Some((stats, sigma, max)) = weighted_stats(samples, norm, &b, &w, weights)? else {
         return Ok(None);
     };
-    let sol = adc2::solve_closed_form(&stats, &t0, &b)?;
+    let sol = adc2::solve(&stats, &t0, &b)?;
     let w_new = sym_inv_sqrt(&(sol.t * sol.t.transpose()))?;
     Ok(Some((pack(&w_new, &sol.centre), sigma, max)))
 }

@@ -1,5 +1,7 @@
-//! Step 4 of Algorithm 1: the re-estimation methods, each a small objective
-//! over the shared [`crate::numerics::quasi_newton`] solver.
+//! Step 4 of Algorithm 1: the re-estimation methods. ADC2 solves its
+//! quadratic cost in closed form; ADC1 and subMLE are small objectives over
+//! the shared BFGS solver (`numerics/quasi_newton.rs`), iterated ADC2 a
+//! fixed-point map accelerated there.
 
 #[cfg(feature = "robust")]
 use crate::tuning::OUTLIER_CUT;
@@ -38,8 +40,9 @@ pub enum Method {
     /// regress on the same `[h_i, 1]`); it is kept to reproduce the paper
     /// and to show that.
     Adc1,
-    /// One-step artificial data creation with quasi-Newton re-estimation
-    /// (the paper's ADC2, steps 1-5).
+    /// One-step artificial data creation with least-squares re-estimation
+    /// (the paper's ADC2, steps 1-5; its quadratic cost solved in closed
+    /// form, where the paper uses a quasi-Newton solver).
     #[default]
     Adc2,
     /// ADC2 repeated to its fixed point, accelerated (Anderson); beyond the
@@ -286,7 +289,8 @@ pub struct Estimate<T: Real> {
     pub centre: Vector3<T>,
     /// Canonical soft-iron correction `W'` (symmetric positive definite).
     pub w: Matrix3<T>,
-    /// Quasi-Newton iterations, summed.
+    /// BFGS iterations, summed (ADC1 and subMLE; 0 for the closed-form
+    /// solves).
     pub iterations: u32,
     /// Passes over the samples after the LS fit.
     pub passes: u32,
