@@ -5,9 +5,7 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 #[cfg(feature = "lg10")]
 use crate::numerics::linalg::{cholesky, min_max, solve_lower, solve_lower_transposed};
-use crate::numerics::linalg::{
-    cholesky_in_place, cholesky_solve, from_columns, solve3, sym_sqrt_and_inv_sqrt,
-};
+use crate::numerics::linalg::{cholesky_in_place, cholesky_solve, solve3, sym_sqrt_and_inv_sqrt};
 #[cfg(any(feature = "svd10", feature = "lg10"))]
 use crate::numerics::linalg::{columns_of, sym_eigen};
 use crate::{Error, Real};
@@ -259,26 +257,31 @@ fn li_griffiths<T: Real>(s: &SMatrix<T, 10, 10>) -> Result<SVector<T, 10>, Error
 // solve has returned, not under it.
 #[inline(never)]
 pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> {
-    // On arrays, not nalgebra's matrices and iterators: those took
-    // 96 bytes of flash more (LS9 + ADC2 without `robust`; 100 with it;
-    // the same operations in the same order).
+    // On scalars, not nalgebra's matrices and iterators nor arrays mapped
+    // (copied on the stack at opt-level "s"): those took 180 bytes of
+    // flash more (LS9 + ADC2 without `robust`; 184 with it; the same
+    // operations in the same order).
     let [v] = v.data.0;
     if !v.iter().all(|x| x.is_finite()) {
         return Err(Error::SingularSystem);
     }
-    // Symmetric: by rows or by columns alike.
-    let a = [[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]];
+    let [a00, a11, a22, a01, a02, a12, p0, p1, p2, v9] = v;
     // A is definite (of either sign) for an ellipsoid; Cramer's rule
     // handles both.
-    let c = solve3(&a, &[v[6], v[7], v[8]]).ok_or(Error::NotAnEllipsoid)?;
-    let centre = c.map(|x| -x);
-    let a_centre = a.map(|row| row[0] * centre[0] + row[1] * centre[1] + row[2] * centre[2]);
-    let k = centre[0] * a_centre[0] + centre[1] * a_centre[1] + centre[2] * a_centre[2] - v[9];
-    if !(k != T::zero()) || !centre.iter().all(|x| x.is_finite()) {
+    let a = [[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]];
+    let [c0, c1, c2] = solve3(&a, &[p0, p1, p2]).ok_or(Error::NotAnEllipsoid)?;
+    let (b0, b1, b2) = (-c0, -c1, -c2);
+    let k = b0 * (a00 * b0 + a01 * b1 + a02 * b2)
+        + b1 * (a01 * b0 + a11 * b1 + a12 * b2)
+        + b2 * (a02 * b0 + a12 * b1 + a22 * b2)
+        - v9;
+    if !(k != T::zero()) || !(b0.is_finite() && b1.is_finite() && b2.is_finite()) {
         return Err(Error::NotAnEllipsoid);
     }
-    let m = from_columns(a.map(|row| row.map(|x| x / k)));
-    let centre = Vector3::from(centre);
+    // Each distinct entry of the symmetric `A / k` once.
+    let (m00, m11, m22, m01, m02, m12) = (a00 / k, a11 / k, a22 / k, a01 / k, a02 / k, a12 / k);
+    let m = Matrix3::new(m00, m01, m02, m01, m11, m12, m02, m12, m22);
+    let centre = Vector3::new(b0, b1, b2);
     let (w, t) = sym_sqrt_and_inv_sqrt(&m)?;
     Ok(Ellipsoid { centre, m, w, t })
 }
