@@ -344,48 +344,6 @@ impl<T: Real> Gate<T> {
     }
 }
 
-/// Which rows a per-sample loop visits: [`Gate`] for the robust path, or
-/// [`Finite`] for the plain one, whose loop is then the plain pipeline's
-/// (no rule, no screening, no row before to track: 20-40 instructions a
-/// sample less on a Cortex-M4F in each pass).
-pub(crate) trait Filter<T: Real> {
-    /// The rows of `block` the filter passes; `prev` is the row before the
-    /// block in the whole slice.
-    fn rows<'a, S: Sample>(
-        &'a self,
-        block: &'a [S],
-        prev: Option<&'a S>,
-    ) -> impl Iterator<Item = [T; 3]> + 'a;
-}
-
-/// Every finite, representable row (the rules of [`Rules::PLAIN`]).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Finite;
-
-impl<T: Real> Filter<T> for Finite {
-    #[inline(always)]
-    fn rows<'a, S: Sample>(
-        &'a self,
-        block: &'a [S],
-        _prev: Option<&'a S>,
-    ) -> impl Iterator<Item = [T; 3]> + 'a {
-        block
-            .iter()
-            .filter_map(|s| check::<T, S>(s, None, &Rules::PLAIN).ok())
-    }
-}
-
-impl<T: Real> Filter<T> for Gate<T> {
-    #[inline(always)]
-    fn rows<'a, S: Sample>(
-        &'a self,
-        block: &'a [S],
-        prev: Option<&'a S>,
-    ) -> impl Iterator<Item = [T; 3]> + 'a {
-        Gate::rows(self, block, prev)
-    }
-}
-
 /// What a fit did with one row ([`Selection::classify`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
