@@ -264,7 +264,8 @@ impl<T: Real> Gate<T> {
     }
 
     /// Whether a pass over the rows the gate passes takes its plain loop
-    /// ([`Finite`]): the gate is plain. Without the `robust` feature never:
+    /// (each row converted inline, `check` with [`Rules::PLAIN`]): the
+    /// gate is plain. Without the `robust` feature never:
     /// the scan, the moments and the final pass link their gated loops
     /// alone (the same rows in the same order, so the same sums). Flash
     /// over speed, as the plain build is for parts where flash decides:
@@ -286,7 +287,7 @@ impl<T: Real> Gate<T> {
     /// Cortex-M4F: 47 312 -> 42 616 bytes of flash, `bench.sh footprint`),
     /// for about 10 instructions a gated row more (LS9 + ADC2, n = 1000,
     /// a tenth of the rows displaced: 1.56 M -> 1.70 M instructions; clean
-    /// data take the plain loops, [`Finite`], and do not pay it).
+    /// data take the plain loops, [`Gate::plain_loop`], and do not pay it).
     #[inline(always)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
         self.admit(sample, prev).ok()
