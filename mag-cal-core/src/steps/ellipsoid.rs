@@ -275,7 +275,7 @@ pub fn from_quadric<T: Real>(v: &SVector<T, 10>) -> Result<Ellipsoid<T>, Error> 
         + b1 * (a01 * b0 + a11 * b1 + a12 * b2)
         + b2 * (a02 * b0 + a12 * b1 + a22 * b2)
         - v9;
-    if !(k != T::zero()) || !(b0.is_finite() && b1.is_finite() && b2.is_finite()) {
+    if !(k != T::zero() && b0.is_finite() && b1.is_finite() && b2.is_finite()) {
         return Err(Error::NotAnEllipsoid);
     }
     // Each distinct entry of the symmetric `A / k` once.
