@@ -160,7 +160,6 @@ pub(crate) fn sym_eigen<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<SymEig
         values: [T::zero(); N],
         vectors: [[T::zero(); N]; N],
     };
-    #[cfg(not(feature = "robust"))]
     if let Some(mut a4) = as_4x4(m) {
         let mut v4 = [[T::zero(); 4]; 4];
         let scale = jacobi(&mut a4, Some(&mut v4))?;
@@ -182,7 +181,6 @@ pub(crate) fn sym_eigen<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<SymEig
 
 /// The eigenvalues alone (cheaper: no vectors are accumulated).
 pub(crate) fn sym_eigenvalues<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<[T; N], Error> {
-    #[cfg(not(feature = "robust"))]
     if let Some(mut a4) = as_4x4(m) {
         let mut values = [T::zero(); N];
         let scale = jacobi(&mut a4, None)?;
@@ -214,13 +212,12 @@ pub(crate) fn min_max<T: Real, const N: usize>(values: &[T; N]) -> (T, T) {
 /// square root of `M`) and the 4x4 ones (the Gram condition) then share
 /// one copy of the iteration. The same rotations in the same order (one
 /// with the zero row is skipped: its entry is zero), so the same values
-/// and vectors to the bit. `None` unless `N` is 3. Without the `robust`
-/// feature only: LS9 + ADC2 on a Cortex-M4F takes 536 bytes less flash
-/// (`bash bench.sh flash`); with it, 548 bytes less, but 72 bytes more
-/// stack at the robust path's deepest point (the 4x4 copies under
-/// `positive_definite_eigen`): 4 164 bytes, over its 4 KiB budget
-/// (`bash bench.sh footprint`).
-#[cfg(not(feature = "robust"))]
+/// and vectors to the bit. `None` unless `N` is 3. LS9 + ADC2 on a
+/// Cortex-M4F: 536 bytes less flash (32 952 -> 32 416, `bash bench.sh
+/// flash`), 28 bytes more stack at the robust path's deepest point (4 016
+/// -> 4 044, `bash bench.sh footprint`), clean `adc2` 459 680 -> 465 760
+/// instructions (`bash bench.sh bench`); the contamination table is
+/// unchanged.
 #[inline(always)]
 fn as_4x4<T: Real, const N: usize>(m: &Mat<T, N>) -> Option<Mat<T, 4>> {
     if N != 3 {
@@ -236,7 +233,6 @@ fn as_4x4<T: Real, const N: usize>(m: &Mat<T, N>) -> Option<Mat<T, 4>> {
 }
 
 /// The diagonal of `a` times `scale`, into `values` (as far as both go).
-#[cfg(not(feature = "robust"))]
 #[inline(always)]
 fn scaled_diagonal<T: Real, const M: usize, const N: usize>(
     a: &Mat<T, M>,
