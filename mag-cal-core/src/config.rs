@@ -1,4 +1,4 @@
-//! What to run: [`Config`](crate::Config).
+//! What to run: [`Config`].
 
 use crate::{LsVariant, Method, Thresholds};
 

@@ -6,7 +6,7 @@
 //!
 //! What a caller may reasonably set is in [`Thresholds`](crate::Thresholds)
 //! (the judging's limits, whose defaults are here) and validated once by
-//! [`Config::validate`](crate::Config::validate); the rest is fixed. The
+//! [`Thresholds::validate`](crate::Thresholds::validate); the rest is fixed. The
 //! robust path's mechanisms and what each buys are in `docs/robustness.md`,
 //! section 5 (`cargo xtask ablation`). The background calibrator's own
 //! constants are still in `device/background.rs` (`background::RECENT`,

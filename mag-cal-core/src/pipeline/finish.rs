@@ -23,14 +23,14 @@ pub(super) struct Finished<T: Real> {
     /// errors.
     pub(super) misshapen: bool,
     /// The radial residuals have heavier tails than noise: their RMS is
-    /// above [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL) robust sigmas, and above the level of
+    /// above [`CLEAN_TAIL`] robust sigmas, and above the level of
     /// rounding (`sqrt(eps)` of the field), where the tails are the
     /// rounding's own.
     pub(super) heavy_tails: bool,
 }
 
 /// The method from the start; a failure is judged on the figures so far.
-/// Out of line, as [`finish`]: the method's passes and the final pass then
+/// Out of line, as [`finish()`]: the method's passes and the final pass then
 /// take their stack one after the other, not one under the other.
 #[inline(never)]
 pub(super) fn method_step<T: Real, S: Sample>(

@@ -26,20 +26,20 @@ use robust::robust_path;
 /// method's own passes, and finally one pass for the quality figures. On
 /// contaminated data ([`Config::robust`](crate::Config::robust)), screening and robust LS passes
 /// come before the method's (see [the crate docs](crate#outliers)). The
-/// figures are then judged in one place ([`quality`](crate::quality)): planar, shapeless,
+/// figures are then judged in one place ([`quality`]): planar, shapeless,
 /// outlier-ridden, ambiguous, too eccentric or poorly covered data are
-/// refused with a specific [`Error`](crate::Error), milder findings reported as
+/// refused with a specific [`Error`], milder findings reported as
 /// [`Warning`](crate::Warning)s.
 ///
 /// # Flash
 /// The method and the LS variant are resolved to functions here, in a
 /// small wrapper inlined at the call site; the pipeline takes them as
-/// function pointers. With a constant [`Config`](crate::Config) (e.g. `Config::default()`)
+/// function pointers. With a constant [`Config`] (e.g. `Config::default()`)
 /// the optimiser sees which are used and links only those: LS9 + ADC2
 /// alone is what firmware pays for. A `Config` chosen at run time links
 /// every method its cargo features enable (see [Features](crate#features)):
 /// a method or LS variant whose feature is off is refused with
-/// [`Error::NotEnabled`](crate::Error::NotEnabled).
+/// [`Error::NotEnabled`].
 #[inline(always)]
 pub fn calibrate<T: Real, S: Sample>(samples: &[S], config: &Config) -> Result<Fit<T>, Error> {
     // Here, inlined: with a constant `Config` the check folds away (inside
@@ -124,8 +124,8 @@ pub(super) enum Route {
     /// The robust path's: outlier handling is on, and the plain path
     /// refused, failed, or its fit is not clean: residuals with heavy tails
     /// or pulled inwards in the method's first pass (`CLEAN_KURTOSIS`,
-    /// `CLEAN_SKEWNESS`), a residual beyond [`CLEAN_LIMIT`] robust
-    /// sigmas, an RMS beyond [`CLEAN_TAIL`] of them, a lack of fit beyond
+    /// `CLEAN_SKEWNESS`), a residual beyond [`CLEAN_LIMIT`](crate::tuning::CLEAN_LIMIT) robust
+    /// sigmas, an RMS beyond [`CLEAN_TAIL`](crate::tuning::CLEAN_TAIL) of them, a lack of fit beyond
     /// its limit, or an LS fit misshapen beyond `CLEAN_SHAPE`.
     Robust,
 }

@@ -74,7 +74,7 @@ pub(super) fn plain_path<T: Real, S: Sample>(
 }
 
 /// The plain path up to the method: the moments and the LS fit, and the
-/// figures they give (into `figures`). Out of line, as [`robust_start`]:
+/// figures they give (into `figures`). Out of line, as `robust_start`:
 /// the moments take stack only until the method starts.
 #[inline(never)]
 pub(super) fn plain_start<T: Real, S: Sample>(

@@ -192,7 +192,7 @@ pub(super) fn robust_rest<T: Real, S: Sample>(
     finish_fit(samples, config, start, &est, figures)
 }
 
-/// [`finish`] for the robust path, which needs only the fit. Out of line:
+/// [`finish()`] for the robust path, which needs only the fit. Out of line:
 /// the finished fit then takes stack in this frame only, not in the
 /// robust path's while its start and the method run.
 #[inline(never)]

@@ -128,7 +128,7 @@ impl<T: Real> Stats<T> {
         Self::accumulate_plain(samples, norm, centre, w).map(|(stats, _)| stats)
     }
 
-    /// [`Stats::accumulate`], and the shape of the algebraic residuals
+    /// `Stats::accumulate`, and the shape of the algebraic residuals
     /// `e_i = |u_i|^2 - 1` at the start ([`Tails`]).
     #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
     pub(crate) fn accumulate_plain<S: Sample>(

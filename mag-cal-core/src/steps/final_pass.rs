@@ -27,7 +27,7 @@ pub(crate) struct FinalPass<T: Real> {
     pub used: usize,
     /// `1.4826 median||u| - 1|` over the rows the gate passed.
     pub fit_error: T,
-    /// See [`Quality::lack_of_fit`].
+    /// See [`crate::Quality::lack_of_fit`].
     pub lack_of_fit: T,
     /// Whether the cell means are off zero beyond the noise.
     pub misfit_significant: bool,

@@ -103,7 +103,7 @@ pub fn run<T: Real, S: Sample>(
     step(samples, norm, ls, config, &Weights::PLAIN)
 }
 
-/// [`run`] with 0/1 weights: the artificial-data pass leaves out the rows
+/// `run` with 0/1 weights: the artificial-data pass leaves out the rows
 /// the weights reject.
 pub(crate) fn step<T: Real, S: Sample>(
     samples: &[S],
