@@ -160,9 +160,10 @@
 //!
 //! Steps 2-4 are the cargo feature `robust` (default). Without it (an
 //! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
-//! takes about 22 KB of flash instead of 36 KB and 3.4 KB of stack, but
-//! about 650 000 instructions instead of 470 000 on 1000 clean samples,
-//! as each pass keeps its gated loop only) only the plain pipeline is
+//! takes about 19 KB of flash instead of 32 KB and 3.1 KB of stack, but
+//! more instructions on clean samples (651 640 against 472 160 at
+//! `7618f79`, when last measured), as each pass keeps its gated loop only)
+//! only the plain pipeline is
 //! compiled: step 1's
 //! rules, then the plain fit, whose answer, a calibration or a refusal,
 //! is returned as it is. It keeps the glitch rules (with
@@ -194,11 +195,11 @@
 //! # Cost
 //!
 //! LS9 + ADC2 on 1000 `[i16; 3]` samples in `f32` on a Cortex-M4F: about
-//! 470 000 instructions on clean samples (two passes over the samples for
+//! 466 000 instructions on clean samples (two passes over the samples for
 //! the fit, one for the scan and one for the figures); 0.8-1.8 M on samples
-//! with 10 % of the rows contaminated, and about 7.9 M when a result in
+//! with 10 % of the rows contaminated, and about 7.8 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
-//! 36 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
+//! 32 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
 //! variant.
 //!
 //! # Features
