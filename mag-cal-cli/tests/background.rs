@@ -70,13 +70,11 @@ fn agrees_with_fit(name: &str) -> (f64, f64) {
 
 #[test]
 fn the_final_calibration_agrees_with_fit_on_icm20948() {
-    // Measured |db| 0.0185, |drho| 0.0057 of the field (`magcal background`
-    // and `magcal fit` of the file, --format json): a thin margin under
-    // AGREE. The first calibration, at row 121 from 113 samples in 41
-    // cells (fit error 0.0235), is never replaced: a refit is adopted only
-    // if its fit error is below 0.9 of the current one, and the file's
-    // noise floor is about that error (the batch fit's is 0.0238), so the
-    // 3 later refits are kept, not adopted.
+    // Measured |db| 0.0030, |drho| 0.0025 of the field (`magcal background`
+    // and `magcal fit` of the file, --format json): first calibrated at
+    // row 75 from 56 samples in 25 cells, then 2 more refits adopted and
+    // 2 kept. (Before the still rule of the first readings, `Pushed::Still`,
+    // the first calibration at row 121 was never replaced: 0.0185.)
     agrees_with_fit("icm20948_mag_300.csv");
 }
 
