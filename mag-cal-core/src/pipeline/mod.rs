@@ -71,12 +71,43 @@ fn pipeline<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    let scan = normalize::scan::<T, S>(samples, config.robust)?;
+    // The still periods are set aside in the scan (issue 36).
+    let scan = normalize::scan_still::<T, S>(samples, config.robust, config.still)?;
     // Without outlier handling the plain path's answer is the answer.
     #[cfg(not(feature = "robust"))]
-    return plain_path(samples, config, &scan, ls_solve, step);
+    let fit = plain_path(samples, config, &scan, ls_solve, step);
     #[cfg(feature = "robust")]
-    robust_pipeline(samples, config, &scan, ls_solve, step)
+    let fit = robust_pipeline(samples, config, &scan, ls_solve, step);
+    fit.map_err(|e| hardly_moved(&scan.dwell, e))
+}
+
+/// A refusal of the shape of rows that lie in one time run nearly all (a
+/// device that never moved, [`crate::steps::dwell`]) is refused as
+/// [`Error::HardlyMoved`]: the cause is the missing motion.
+#[inline(never)]
+fn hardly_moved(dwell: &crate::Dwell, e: Error) -> Error {
+    let shape = matches!(
+        e,
+        Error::NoSphere { .. }
+            | Error::Planar { .. }
+            | Error::NotAnEllipsoid
+            | Error::SingularSystem
+            | Error::FilledCloud { .. }
+            | Error::AmbiguousQuadric { .. }
+            | Error::PoorCoverage { .. }
+            | Error::ExtremeDistortion { .. }
+            | Error::SystematicMisfit { .. }
+    );
+    if shape && dwell.whole() {
+        let (moving, still) = dwell.moved();
+        Error::HardlyMoved {
+            moving,
+            still,
+            required: 0,
+        }
+    } else {
+        e
+    }
 }
 
 /// [`pipeline`] after the scan, with outlier handling compiled in: the
@@ -91,10 +122,7 @@ fn robust_pipeline<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    let gate = rules::Gate {
-        rules: scan.rules,
-        screen: None,
-    };
+    let gate = rules::Gate::of(scan.rules, &scan.dwell);
     if config.robust && screen::clip_hint(samples, &gate, scan.used) {
         // A clip level may bend the plain fit unseen: screening finds it.
         return robust_path(samples, config, scan, ls_solve, step);

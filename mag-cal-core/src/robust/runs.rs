@@ -108,13 +108,21 @@ impl Runs {
         self.missed
     }
 
-    /// Calls `visit(row, row before)` on every row of the spans.
+    /// Calls `visit(row, row before)` on every row of the spans outside
+    /// the still periods `dwell`.
     #[cfg(feature = "robust")]
-    pub(crate) fn visit<S>(&self, samples: &[S], mut visit: impl FnMut(&S, Option<&S>)) {
+    pub(crate) fn visit<S>(
+        &self,
+        samples: &[S],
+        dwell: &crate::Dwell,
+        mut visit: impl FnMut(&S, Option<&S>),
+    ) {
         for &(s, e) in self.spans() {
             let mut prev = s.checked_sub(1).and_then(|j| samples.get(j));
-            for row in samples.get(s..e).unwrap_or(&[]) {
-                visit(row, prev);
+            for (i, row) in samples.get(s..e).unwrap_or(&[]).iter().enumerate() {
+                if !dwell.contains(s + i) {
+                    visit(row, prev);
+                }
                 prev = Some(row);
             }
         }
@@ -123,26 +131,48 @@ impl Runs {
     /// The pieces of `samples` outside the spans, each at most `size` rows,
     /// with its first row's index and the row before it in `samples` (the
     /// repetition rule reads it). Without spans, the chunks of `size`.
-    #[inline(always)]
+    /// (The passes take their pieces from their gate, [`crate::steps::rules`],
+    /// which skips the still periods too.)
+    #[cfg(test)]
     pub(crate) fn pieces<'a, S>(
         &'a self,
         samples: &'a [S],
         size: usize,
     ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
+        self.pieces_outside(&[], samples, size)
+    }
+
+    /// [`Runs::pieces`] outside the spans `more` too (ascending and
+    /// disjoint; they may overlap these: the still periods,
+    /// [`crate::steps::dwell`]).
+    #[inline(always)]
+    pub(crate) fn pieces_outside<'a, S>(
+        &'a self,
+        more: &'a [(usize, usize)],
+        samples: &'a [S],
+        size: usize,
+    ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
         let size = size.max(1);
         let spans = self.spans();
-        let (mut at, mut k) = (0usize, 0usize);
+        let (mut at, mut k, mut m) = (0usize, 0usize, 0usize);
         core::iter::from_fn(move || {
-            // Past the spans that begin at or before `at`: at most one
-            // step a span.
-            while let Some(&(s, e)) = spans.get(k) {
-                if at < s {
+            // Past the spans of either list that begin at or before `at`:
+            // at most one step a span.
+            loop {
+                if let Some(&(_, e)) = spans.get(k).filter(|&&(s, _)| s <= at) {
+                    at = at.max(e);
+                    k += 1;
+                } else if let Some(&(_, e)) = more.get(m).filter(|&&(s, _)| s <= at) {
+                    at = at.max(e);
+                    m += 1;
+                } else {
                     break;
                 }
-                at = at.max(e);
-                k += 1;
             }
-            let stop = spans.get(k).map_or(samples.len(), |&(s, _)| s);
+            let stop = spans
+                .get(k)
+                .map_or(samples.len(), |&(s, _)| s)
+                .min(more.get(m).map_or(samples.len(), |&(s, _)| s));
             let end = stop.min(samples.len()).min(at.saturating_add(size));
             let piece = samples.get(at..end).filter(|p| !p.is_empty())?;
             let prev = at.checked_sub(1).and_then(|j| samples.get(j));
@@ -316,7 +346,7 @@ mod tests {
         // Each row of the spans once, with the row before it.
         let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
         let (mut seen, mut tenth) = (0, 0);
-        runs.visit(&rows, |&row, prev| {
+        runs.visit(&rows, &crate::Dwell::NONE, |&row, prev| {
             assert_eq!(prev.copied(), row.checked_sub(1));
             seen += 1;
             tenth += usize::from(row % 10 == 0);
@@ -359,5 +389,27 @@ mod tests {
         assert!(Runs::from_spans(&too_many[..RUNS]).is_some());
         let mut ends = Runs::NONE.pieces(&rows, 32).map(|(s, _, p)| s + p.len());
         assert!([32, 64, 96, 100].into_iter().eq(ends.by_ref()));
+    }
+
+    #[test]
+    fn the_pieces_skip_both_lists_of_spans() {
+        let rows: [usize; 100] = core::array::from_fn(|i| i);
+        let runs = Runs::from_spans(&[(10, 20), (50, 60)]).unwrap();
+        // Overlapping, touching and apart.
+        let more = [(0, 3), (15, 25), (25, 30), (55, 58), (90, 100)];
+        let inside = |i: usize| runs.contains(i) || more.iter().any(|&(s, e)| s <= i && i < e);
+        let mut next = 0;
+        for (start, prev, piece) in runs.pieces_outside(&more, &rows, 7) {
+            assert_eq!(prev, start.checked_sub(1).map(|j| &rows[j]));
+            assert!(piece.len() <= 7);
+            for &i in piece {
+                while inside(next) {
+                    next += 1;
+                }
+                assert_eq!(i, next);
+                next += 1;
+            }
+        }
+        assert_eq!(next, 90);
     }
 }

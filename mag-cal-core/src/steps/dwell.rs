@@ -1,0 +1,485 @@
+//! Still periods (issue 36): the rows of a device lying still, beyond the
+//! first few, are set aside before any fit.
+//!
+//! A log usually starts and ends with the device lying still. Every
+//! equal-weight least-squares step lets such a dense cluster outweigh the
+//! rotation, and the screening's median centre sits inside it; so the rows
+//! of a still period beyond its first `K` are left out of every pass, as
+//! the drop rules' rows are.
+//!
+//! One pass over the rows the drop rules keep ([`detect`], in the scan):
+//!
+//! - the local noise `sigma` is an exponential moving average (weight
+//!   [`DWELL_EMA`]) of the mean over the axes of `|x[i] - 2 x[i-1] +
+//!   x[i-2]|`, divided by [`DWELL_NOISE`] (the mean absolute second
+//!   difference of white noise of sigma 1);
+//! - a time run is a stretch of consecutive kept rows each within
+//!   [`DWELL_RADIUS`]` sigma` (Euclidean) of the mean of the run so far;
+//!   a row farther starts a new run;
+//! - the [`DWELL_SPANS`] longest runs are kept.
+//!
+//! After the scan's sums ([`Detection::decide`]), a run of at least
+//! [`DWELL_MIN_RUN`] rows and [`DWELL_LONG`]` K` whose radius is at most [`DWELL_SCALE`] times
+//! the rows' spread is a still period: its first `K` rows are kept and the
+//! rest set aside, `K = max(DWELL_KEEP, n_motion / DWELL_SHARE)` with
+//! `n_motion` the rows left (a fixed point, iterated). The spread guards
+//! rows that are not in time order (a shuffled or interleaved recording):
+//! their second differences are as large as their spread, and every row
+//! would lie in one run.
+//!
+//! No row is copied and nothing is stored per row: the set-aside rows are
+//! a few spans ([`Dwell`]), which every later pass skips as it skips the
+//! spans beside runs of outliers ([`crate::robust::runs`]). A recording
+//! that is one run from end to end (a device that never moved) is refused
+//! as [`crate::Error::HardlyMoved`].
+
+use crate::sample::Sample;
+use crate::steps::rules::{check, Rules};
+use crate::tuning::{
+    DWELL_EMA, DWELL_KEEP, DWELL_LONG, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE,
+    DWELL_SHARE,
+};
+use crate::Real;
+
+/// At most this many still periods are set aside: the longest runs.
+pub const DWELL_SPANS: usize = 8;
+
+/// The rows set aside as still periods: half-open spans `start..end` of
+/// row indices, ascending and disjoint, and the rows in them that the drop
+/// rules keep.
+///
+/// ```
+/// use mag_cal_core::Dwell;
+/// assert!(Dwell::NONE.is_empty() && !Dwell::NONE.contains(3));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Dwell {
+    spans: [(usize, usize); DWELL_SPANS],
+    len: usize,
+    rows: usize,
+    /// The rows of the longest time run, and the rows the rules keep.
+    longest: usize,
+    kept: usize,
+}
+
+impl Default for Dwell {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+impl Dwell {
+    /// No row set aside.
+    pub const NONE: Self = Self {
+        spans: [(0, 0); DWELL_SPANS],
+        len: 0,
+        rows: 0,
+        longest: 0,
+        kept: 0,
+    };
+
+    /// The spans, ascending.
+    pub fn spans(&self) -> &[(usize, usize)] {
+        self.spans.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Rows set aside (those in the spans that the drop rules keep).
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Whether no row is set aside.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Whether row `i` lies in a span.
+    pub fn contains(&self, i: usize) -> bool {
+        self.spans().iter().any(|&(s, e)| s <= i && i < e)
+    }
+
+    /// Whether one time run holds all but `1 / DWELL_SHARE` of the rows
+    /// the rules keep: the device never moved.
+    pub(crate) fn whole(&self) -> bool {
+        self.kept > 0 && self.longest + self.kept / DWELL_SHARE >= self.kept
+    }
+
+    /// The rows outside the longest time run, and those in it.
+    pub(crate) fn moved(&self) -> (usize, usize) {
+        (self.kept.saturating_sub(self.longest), self.longest)
+    }
+}
+
+/// A time run: its first row, one past its last, the rows kept in it,
+/// and its radius at its end (sensor units).
+#[derive(Clone, Copy, Debug)]
+struct Run<T> {
+    start: usize,
+    end: usize,
+    kept: usize,
+    radius: T,
+}
+
+/// What [`detect`] found: the longest runs and the rows kept.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Detection<T> {
+    runs: [Run<T>; DWELL_SPANS],
+    len: usize,
+    kept: usize,
+}
+
+/// The pass of the rule: the [`DWELL_SPANS`] longest time runs of the rows
+/// `rules` keep.
+#[inline(never)]
+pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Detection<T> {
+    let zero = T::zero();
+    let mut found = Detection {
+        runs: [Run {
+            start: 0,
+            end: 0,
+            kept: 0,
+            radius: zero,
+        }; DWELL_SPANS],
+        len: 0,
+        kept: 0,
+    };
+    let gain = T::lit(DWELL_RADIUS / DWELL_NOISE);
+    let weight = T::lit(DWELL_EMA);
+    let third = T::lit(1.0 / 3.0);
+    // The two rows kept before, the noise's average (none before the
+    // first second difference: the first rows join the first run).
+    let (mut a, mut b): (Option<[T; 3]>, Option<[T; 3]>) = (None, None);
+    let mut ema: Option<T> = None;
+    // The open run: its first row (the origin of its sums), the sums of
+    // `y - first`, and the run itself.
+    let mut first = [zero; 3];
+    let mut sum = [zero; 3];
+    let mut run = Run {
+        start: 0,
+        end: 0,
+        kept: 0,
+        radius: T::MAX,
+    };
+    let mut prev = None;
+    for (i, s) in samples.iter().enumerate() {
+        let row = check::<T, S>(s, prev, rules);
+        prev = Some(s);
+        let Ok(y) = row else {
+            continue;
+        };
+        found.kept += 1;
+        if let (Some(p2), Some(p1)) = (a, b) {
+            let d = ((y[0] - p1[0] - p1[0] + p2[0]).abs()
+                + (y[1] - p1[1] - p1[1] + p2[1]).abs()
+                + (y[2] - p1[2] - p1[2] + p2[2]).abs())
+                * third;
+            ema = Some(match ema {
+                Some(e) => e + (d - e) * weight,
+                None => d,
+            });
+        }
+        (a, b) = (b, Some(y));
+        let radius = ema.map_or(T::MAX, |e| e * gain);
+        if run.kept > 0 {
+            let n = T::from_count(run.kept);
+            let d = [
+                y[0] - first[0] - sum[0] / n,
+                y[1] - first[1] - sum[1] / n,
+                y[2] - first[2] - sum[2] / n,
+            ];
+            let q = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            // A radius of `MAX` (no noise known yet) keeps every row.
+            if radius < T::MAX && q > radius * radius {
+                found.close(run);
+                run.kept = 0;
+            }
+        }
+        if run.kept == 0 {
+            run.start = i;
+            first = y;
+            sum = [zero; 3];
+        }
+        for k in 0..3 {
+            sum[k] += y[k] - first[k];
+        }
+        run.kept += 1;
+        run.end = i + 1;
+        run.radius = radius;
+    }
+    if run.kept > 0 {
+        found.close(run);
+    }
+    found
+}
+
+impl<T: Real> Detection<T> {
+    /// Keeps `run` if it is among the longest.
+    fn close(&mut self, run: Run<T>) {
+        if let Some(slot) = self.runs.get_mut(self.len) {
+            *slot = run;
+            self.len += 1;
+            return;
+        }
+        // The shortest kept, replaced by a longer one.
+        let mut k = 0;
+        for (j, r) in self.runs.iter().enumerate() {
+            if r.kept < self.runs.get(k).map_or(0, |s| s.kept) {
+                k = j;
+            }
+        }
+        if let Some(slot) = self.runs.get_mut(k) {
+            if run.kept > slot.kept {
+                *slot = run;
+            }
+        }
+    }
+
+    /// The rows set aside, given the spread of the rows (`scale`, the RMS
+    /// distance from their mean, sensor units): the runs of at least
+    /// [`DWELL_MIN_RUN`] rows within [`DWELL_SCALE`]` scale`, each but its
+    /// first `K` rows.
+    pub(crate) fn decide<S: Sample>(&self, samples: &[S], rules: &Rules<T>, scale: T) -> Dwell {
+        let mut dwell = Dwell::NONE;
+        let runs = self.runs.get(..self.len).unwrap_or(&[]);
+        dwell.longest = runs.iter().map(|r| r.kept).max().unwrap_or(0);
+        dwell.kept = self.kept;
+        if !(scale > T::zero()) {
+            // No spread (every row equal): nothing to set aside.
+            return dwell;
+        }
+        let limit = scale * T::lit(DWELL_SCALE);
+        // A still period: at least `DWELL_MIN_RUN` rows and `DWELL_LONG`
+        // times the rows it keeps, within `DWELL_SCALE` spreads.
+        let still = |r: &Run<T>, keep: usize| {
+            r.kept >= DWELL_MIN_RUN.max(keep * DWELL_LONG) && r.radius <= limit
+        };
+        // K = max(DWELL_KEEP, n_motion / DWELL_SHARE): a fixed point,
+        // reached in a few steps (K grows with n_motion, which shrinks as
+        // K grows).
+        let mut keep = DWELL_KEEP;
+        for _ in 0..8 {
+            let aside: usize = runs
+                .iter()
+                .filter(|r| still(r, keep))
+                .map(|r| r.kept.saturating_sub(keep))
+                .sum();
+            keep = DWELL_KEEP.max(self.kept.saturating_sub(aside) / DWELL_SHARE);
+        }
+        let still = |r: &&Run<T>| still(r, keep);
+        // In ascending order of their first rows: the next run after the
+        // last one taken, at most `DWELL_SPANS` steps (no sort, no index).
+        let mut after: Option<usize> = None;
+        for _ in 0..DWELL_SPANS {
+            let next = runs
+                .iter()
+                .filter(still)
+                .filter(|r| r.kept > keep && after.is_none_or(|a| r.start > a))
+                .min_by_key(|r| r.start);
+            let Some(r) = next else {
+                break;
+            };
+            after = Some(r.start);
+            // The span starts after the run's `keep`-th kept row.
+            let mut seen = 0;
+            let mut start = r.end;
+            let mut prev = r.start.checked_sub(1).and_then(|j| samples.get(j));
+            for (j, s) in samples
+                .get(r.start..r.end)
+                .unwrap_or(&[])
+                .iter()
+                .enumerate()
+            {
+                if check::<T, S>(s, prev, rules).is_ok() {
+                    seen += 1;
+                    if seen == keep {
+                        start = r.start + j + 1;
+                        break;
+                    }
+                }
+                prev = Some(s);
+            }
+            if start < r.end {
+                if let Some(slot) = dwell.spans.get_mut(dwell.len) {
+                    *slot = (start, r.end);
+                    dwell.len += 1;
+                    dwell.rows += r.kept.saturating_sub(keep);
+                }
+            }
+        }
+        dwell
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::string::ToString;
+    use std::vec::Vec;
+
+    /// A sphere of radius 100 about (20, -10, 5), traced along a slow
+    /// spiral: `n` rows, with Gaussian-like noise `noise`.
+    pub(crate) fn spiral(n: usize, noise: f64, seed: u64) -> Vec<[f64; 3]> {
+        let mut rng = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+        let mut gauss = || {
+            let mut s = 0.0;
+            for _ in 0..12 {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                s += (rng >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            s - 6.0
+        };
+        (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) / n as f64;
+                let z = 1.0 - 2.0 * t;
+                let r = (1.0 - z * z).sqrt();
+                let phi = t * 40.0;
+                [
+                    20.0 + 100.0 * r * phi.cos() + noise * gauss(),
+                    -10.0 + 100.0 * r * phi.sin() + noise * gauss(),
+                    5.0 + 100.0 * z + noise * gauss(),
+                ]
+            })
+            .collect()
+    }
+
+    fn with_still_ends(rows: &[[f64; 3]], k: usize, noise: f64) -> Vec<[f64; 3]> {
+        let still = spiral(2 * k, 0.0, 0);
+        let mut jitter = spiral(2 * k, noise, 9)
+            .into_iter()
+            .zip(still)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]]);
+        let (f, l) = (rows[0], rows[rows.len() - 1]);
+        let mut out = Vec::new();
+        for _ in 0..k {
+            let j = jitter.next().unwrap();
+            out.push([f[0] + j[0], f[1] + j[1], f[2] + j[2]]);
+        }
+        out.extend_from_slice(rows);
+        for _ in 0..k {
+            let j = jitter.next().unwrap();
+            out.push([l[0] + j[0], l[1] + j[1], l[2] + j[2]]);
+        }
+        out
+    }
+
+    fn dwell_of(rows: &[[f64; 3]]) -> Dwell {
+        let rules = Rules::<f64>::GLITCHES;
+        let found = detect(rows, &rules);
+        // The spread of the rows about their mean.
+        let n = rows.len() as f64;
+        let mean: Vec<f64> = (0..3)
+            .map(|a| rows.iter().map(|r| r[a]).sum::<f64>() / n)
+            .collect();
+        let var = rows
+            .iter()
+            .map(|r| (0..3).map(|a| (r[a] - mean[a]).powi(2)).sum::<f64>())
+            .sum::<f64>()
+            / n;
+        found.decide(rows, &rules, var.sqrt())
+    }
+
+    #[test]
+    fn still_ends_are_set_aside_but_their_first_rows() {
+        let motion = spiral(600, 0.5, 1);
+        let rows = with_still_ends(&motion, 1200, 0.5);
+        let d = dwell_of(&rows);
+        // Two spans, each the still end but its first K rows (K =
+        // max(4, 600 / 48) = 12, give or take the rows the runs take
+        // from the motion).
+        assert_eq!(d.spans().len(), 2, "{d:?}");
+        let [(s0, e0), (s1, e1)] = [d.spans()[0], d.spans()[1]];
+        assert!(s0 <= 20 && (1190..=1210).contains(&e0), "{d:?}");
+        assert!((1800..=1830).contains(&s1) && e1 == rows.len(), "{d:?}");
+        assert!(d.rows() > 2300 && !d.whole());
+        assert!(d.contains(s0) && !d.contains(e0));
+    }
+
+    #[test]
+    fn a_slowly_moving_device_is_not_still() {
+        // 3 000 rows of one turn: the device moves by about 0.2 % of the
+        // field between rows, four times the noise.
+        let rows = spiral(3000, 0.05, 2);
+        let d = dwell_of(&rows);
+        assert!(d.is_empty(), "{d:?}");
+        assert!(dwell_of(&spiral(600, 1.0, 3)).is_empty());
+    }
+
+    #[test]
+    fn rows_out_of_time_order_are_not_still() {
+        // The same sphere, its rows interleaved: every row lies far from
+        // the one before.
+        let rows = spiral(1000, 0.5, 4);
+        let shuffled: Vec<[f64; 3]> = (0..1000).map(|i| rows[(i * 383) % 1000]).collect();
+        let d = dwell_of(&shuffled);
+        assert!(d.is_empty(), "{d:?}");
+    }
+
+    #[test]
+    fn a_device_that_never_moved_is_one_run() {
+        let rows = with_still_ends(&[[50.0, 20.0, -30.0]], 500, 1.0);
+        let d = dwell_of(&rows);
+        assert!(d.whole());
+    }
+
+    /// The batch fit: still ends of 5x the motion leave the result, and
+    /// their rows are a class of their own.
+    #[test]
+    fn a_log_with_still_ends_calibrates_like_its_motion() {
+        use crate::{calibrate, Config, SampleClass};
+        let motion = spiral(400, 0.5, 5);
+        let rows = with_still_ends(&motion, 1000, 0.5);
+        let base = calibrate::<f64, _>(&motion, &Config::default()).unwrap();
+        let fit = calibrate::<f64, _>(&rows, &Config::default()).unwrap();
+        let (b0, b) = (base.calibration.hard_iron(), fit.calibration.hard_iron());
+        let rho = base.calibration.field_strength();
+        let db = ((b[0] - b0[0]).powi(2) + (b[1] - b0[1]).powi(2) + (b[2] - b0[2]).powi(2)).sqrt();
+        assert!(db < 0.01 * rho, "{db}");
+        assert!((fit.calibration.field_strength() - rho).abs() < 0.01 * rho);
+        let r = &fit.report;
+        assert!(r.dwell > 1950, "{r:?}");
+        assert_eq!(
+            r.samples_used + r.samples_dropped + r.dwell + r.screened + r.rejected,
+            rows.len()
+        );
+        let dwell = fit
+            .report
+            .selection
+            .classify(&fit.calibration, &rows)
+            .filter(|c| *c == SampleClass::Dwell)
+            .count();
+        assert_eq!(dwell, r.dwell);
+    }
+
+    /// A device that never moved is refused as hardly moved, in `f32` and
+    /// `f64`, with and without outlier handling; so is one that moved for
+    /// one row only.
+    #[test]
+    fn a_device_that_never_moved_is_refused_as_hardly_moved() {
+        use crate::{calibrate, Config, Error};
+        for robust in [true, false] {
+            let config = Config {
+                robust,
+                ..Config::default()
+            };
+            let still = with_still_ends(&[[50.0, 20.0, -30.0]], 500, 1.0);
+            let e = calibrate::<f64, _>(&still, &config).unwrap_err();
+            assert!(matches!(e, Error::HardlyMoved { .. }), "{robust}: {e:?}");
+            let small: Vec<[f32; 3]> = still.iter().map(|r| r.map(|v| v as f32)).collect();
+            let e = calibrate::<f32, _>(&small, &config).unwrap_err();
+            assert!(matches!(e, Error::HardlyMoved { .. }), "{robust}: {e:?}");
+            // Two still periods one row apart: too few rows left.
+            let rows = with_still_ends(&[[50.0, 20.0, -30.0], [20.0, 60.0, 10.0]], 700, 0.2);
+            let e = calibrate::<f64, _>(&rows, &config).unwrap_err();
+            assert!(
+                matches!(e, Error::HardlyMoved { required: 10, .. }),
+                "{robust}: {e:?}"
+            );
+            assert!(e.to_string().starts_with("the device hardly moved"), "{e}");
+        }
+    }
+}
