@@ -142,9 +142,8 @@ impl Runs {
         self.pieces_outside(&[], samples, size)
     }
 
-    /// [`Runs::pieces`] outside the spans `more` too (ascending and
-    /// disjoint; they may overlap these: the still periods,
-    /// [`crate::steps::dwell`]).
+    /// [`Runs::pieces`] outside the spans `more` too (in any order; they
+    /// may overlap these: the still periods, [`crate::steps::dwell`]).
     #[inline(always)]
     pub(crate) fn pieces_outside<'a, S>(
         &'a self,
@@ -152,34 +151,58 @@ impl Runs {
         samples: &'a [S],
         size: usize,
     ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
-        let size = size.max(1);
         let spans = self.spans();
-        let (mut at, mut k, mut m) = (0usize, 0usize, 0usize);
+        let mut at = Cursor::default();
         core::iter::from_fn(move || {
-            // Past the spans of either list that begin at or before `at`:
-            // at most one step a span.
-            loop {
-                if let Some(&(_, e)) = spans.get(k).filter(|&&(s, _)| s <= at) {
-                    at = at.max(e);
-                    k += 1;
-                } else if let Some(&(_, e)) = more.get(m).filter(|&&(s, _)| s <= at) {
-                    at = at.max(e);
-                    m += 1;
-                } else {
-                    break;
-                }
-            }
-            let stop = spans
-                .get(k)
-                .map_or(samples.len(), |&(s, _)| s)
-                .min(more.get(m).map_or(samples.len(), |&(s, _)| s));
-            let end = stop.min(samples.len()).min(at.saturating_add(size));
-            let piece = samples.get(at..end).filter(|p| !p.is_empty())?;
-            let prev = at.checked_sub(1).and_then(|j| samples.get(j));
-            let start = at;
-            at = end;
+            let (start, end) = at.next(spans, more, samples.len(), size)?;
+            let piece = samples.get(start..end)?;
+            let prev = start.checked_sub(1).and_then(|j| samples.get(j));
             Some((start, prev, piece))
         })
+    }
+}
+
+/// Where [`Runs::pieces_outside`] stands: the next row.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cursor {
+    at: usize,
+}
+
+impl Cursor {
+    /// The next piece `start..end` of `len` rows outside the spans of both
+    /// lists (in any order; they may overlap), at most `size` rows. Out of
+    /// line and not generic: one copy for every pass (inlined, each pass's
+    /// loop took about 130 bytes of flash more, LS9 + ADC2). A few spans
+    /// each, read whole at each piece: no index to keep.
+    #[inline(never)]
+    fn next(
+        &mut self,
+        spans: &[(usize, usize)],
+        more: &[(usize, usize)],
+        len: usize,
+        size: usize,
+    ) -> Option<(usize, usize)> {
+        // Past every span that holds `at` (a span may end in another).
+        let mut at = self.at;
+        let mut moved = true;
+        while moved {
+            moved = false;
+            for &(s, e) in spans.iter().chain(more) {
+                if s <= at && at < e {
+                    at = e;
+                    moved = true;
+                }
+            }
+        }
+        let stop = spans
+            .iter()
+            .chain(more)
+            .map(|&(s, _)| s)
+            .filter(|&s| s > at)
+            .fold(len, usize::min);
+        let end = stop.min(len).min(at.saturating_add(size.max(1)));
+        self.at = end.max(at);
+        (end > at).then_some((at, end))
     }
 }
 

@@ -34,7 +34,7 @@
 //! as [`crate::Error::HardlyMoved`].
 
 use crate::sample::Sample;
-use crate::steps::rules::{check, Rules};
+use crate::steps::rules::Gate;
 use crate::tuning::{
     DWELL_EMA, DWELL_KEEP, DWELL_LONG, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE,
     DWELL_SHARE,
@@ -45,8 +45,8 @@ use crate::Real;
 pub const DWELL_SPANS: usize = 8;
 
 /// The rows set aside as still periods: half-open spans `start..end` of
-/// row indices, ascending and disjoint, and the rows in them that the drop
-/// rules keep.
+/// row indices, disjoint (not in order), and the rows in them that the
+/// drop rules keep.
 ///
 /// ```
 /// use mag_cal_core::Dwell;
@@ -79,7 +79,7 @@ impl Dwell {
         kept: 0,
     };
 
-    /// The spans, ascending.
+    /// The spans (disjoint, not in order).
     pub fn spans(&self) -> &[(usize, usize)] {
         self.spans.get(..self.len).unwrap_or(&[])
     }
@@ -130,9 +130,9 @@ pub(crate) struct Detection<T> {
 }
 
 /// The pass of the rule: the [`DWELL_SPANS`] longest time runs of the rows
-/// `rules` keep.
+/// `gate` passes (its out-of-line check: no copy of the rules here).
 #[inline(never)]
-pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Detection<T> {
+pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], gate: &Gate<T>) -> Detection<T> {
     let zero = T::zero();
     let mut found = Detection {
         runs: [Run {
@@ -147,10 +147,12 @@ pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Det
     let gain = T::lit(DWELL_RADIUS / DWELL_NOISE);
     let weight = T::lit(DWELL_EMA);
     let third = T::lit(1.0 / 3.0);
-    // The two rows kept before, the noise's average (none before the
-    // first second difference: the first rows join the first run).
-    let (mut a, mut b): (Option<[T; 3]>, Option<[T; 3]>) = (None, None);
-    let mut ema: Option<T> = None;
+    // The two rows kept before (`seen` of them, up to 2) and the noise's
+    // average; before the first second difference the radius is
+    // unbounded: the first rows join the first run.
+    let (mut a, mut b) = ([zero; 3], [zero; 3]);
+    let mut seen = 0u8;
+    let mut ema = T::MAX;
     // The open run: its first row (the origin of its sums), the sums of
     // `y - first`, and the run itself.
     let mut first = [zero; 3];
@@ -163,40 +165,41 @@ pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Det
     };
     let mut prev = None;
     for (i, s) in samples.iter().enumerate() {
-        let row = check::<T, S>(s, prev, rules);
+        let row = gate.admit(s, prev);
         prev = Some(s);
         let Ok(y) = row else {
             continue;
         };
         found.kept += 1;
-        if let (Some(p2), Some(p1)) = (a, b) {
-            let d = ((y[0] - p1[0] - p1[0] + p2[0]).abs()
-                + (y[1] - p1[1] - p1[1] + p2[1]).abs()
-                + (y[2] - p1[2] - p1[2] + p2[2]).abs())
+        if seen >= 2 {
+            let d = ((y[0] - b[0] - b[0] + a[0]).abs()
+                + (y[1] - b[1] - b[1] + a[1]).abs()
+                + (y[2] - b[2] - b[2] + a[2]).abs())
                 * third;
-            ema = Some(match ema {
-                Some(e) => e + (d - e) * weight,
-                None => d,
-            });
+            ema = if ema < T::MAX {
+                ema + (d - ema) * weight
+            } else {
+                d
+            };
+        } else {
+            seen += 1;
         }
-        (a, b) = (b, Some(y));
-        let radius = ema.map_or(T::MAX, |e| e * gain);
-        if run.kept > 0 {
-            let n = T::from_count(run.kept);
-            let d = [
-                y[0] - first[0] - sum[0] / n,
-                y[1] - first[1] - sum[1] / n,
-                y[2] - first[2] - sum[2] / n,
-            ];
-            let q = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-            // A radius of `MAX` (no noise known yet) keeps every row.
-            if radius < T::MAX && q > radius * radius {
+        (a, b) = (b, y);
+        let radius = if ema < T::MAX { ema * gain } else { T::MAX };
+        let n = T::from_count(run.kept.max(1));
+        let d = [
+            y[0] - first[0] - sum[0] / n,
+            y[1] - first[1] - sum[1] / n,
+            y[2] - first[2] - sum[2] / n,
+        ];
+        // The first row of a run is its own reference (no row yet: the
+        // sums are zero and `first` is this row's).
+        if run.kept == 0 || d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > radius * radius {
+            if run.kept > 0 {
                 found.close(run);
-                run.kept = 0;
             }
-        }
-        if run.kept == 0 {
             run.start = i;
+            run.kept = 0;
             first = y;
             sum = [zero; 3];
         }
@@ -214,32 +217,35 @@ pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Det
 }
 
 impl<T: Real> Detection<T> {
-    /// Keeps `run` if it is among the longest.
+    /// Keeps `run` if it is among the longest (in the place of the
+    /// shortest kept: the runs are not in time order).
     fn close(&mut self, run: Run<T>) {
-        if let Some(slot) = self.runs.get_mut(self.len) {
-            *slot = run;
+        let at = if self.len < DWELL_SPANS {
             self.len += 1;
-            return;
-        }
-        // The shortest kept, replaced by a longer one.
-        let mut k = 0;
-        for (j, r) in self.runs.iter().enumerate() {
-            if r.kept < self.runs.get(k).map_or(0, |s| s.kept) {
-                k = j;
+            self.len - 1
+        } else {
+            let (k, shortest) = self
+                .runs
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, r)| r.kept)
+                .map_or((0, usize::MAX), |(k, r)| (k, r.kept));
+            if shortest >= run.kept {
+                return;
             }
-        }
-        if let Some(slot) = self.runs.get_mut(k) {
-            if run.kept > slot.kept {
-                *slot = run;
-            }
+            k
+        };
+        if let Some(slot) = self.runs.get_mut(at) {
+            *slot = run;
         }
     }
 
-    /// The rows set aside, given the spread of the rows (`scale`, the RMS
-    /// distance from their mean, sensor units): the runs of at least
-    /// [`DWELL_MIN_RUN`] rows within [`DWELL_SCALE`]` scale`, each but its
-    /// first `K` rows.
-    pub(crate) fn decide<S: Sample>(&self, samples: &[S], rules: &Rules<T>, scale: T) -> Dwell {
+    /// The spans set aside, given the spread of the rows (`scale`, the RMS
+    /// distance from their mean, sensor units): of each run of at least
+    /// [`DWELL_MIN_RUN`] rows and [`DWELL_LONG`]` K` within
+    /// [`DWELL_SCALE`]` scale`, the rows after its first `K` (the rows set
+    /// aside are counted by the caller: those of the spans the rules keep).
+    pub(crate) fn decide(&self, scale: T) -> Dwell {
         let mut dwell = Dwell::NONE;
         let runs = self.runs.get(..self.len).unwrap_or(&[]);
         dwell.longest = runs.iter().map(|r| r.kept).max().unwrap_or(0);
@@ -249,8 +255,6 @@ impl<T: Real> Detection<T> {
             return dwell;
         }
         let limit = scale * T::lit(DWELL_SCALE);
-        // A still period: at least `DWELL_MIN_RUN` rows and `DWELL_LONG`
-        // times the rows it keeps, within `DWELL_SCALE` spreads.
         let still = |r: &Run<T>, keep: usize| {
             r.kept >= DWELL_MIN_RUN.max(keep * DWELL_LONG) && r.radius <= limit
         };
@@ -266,48 +270,26 @@ impl<T: Real> Detection<T> {
                 .sum();
             keep = DWELL_KEEP.max(self.kept.saturating_sub(aside) / DWELL_SHARE);
         }
-        let still = |r: &&Run<T>| still(r, keep);
-        // In ascending order of their first rows: the next run after the
-        // last one taken, at most `DWELL_SPANS` steps (no sort, no index).
-        let mut after: Option<usize> = None;
-        for _ in 0..DWELL_SPANS {
-            let next = runs
-                .iter()
-                .filter(still)
-                .filter(|r| r.kept > keep && after.is_none_or(|a| r.start > a))
-                .min_by_key(|r| r.start);
-            let Some(r) = next else {
-                break;
-            };
-            after = Some(r.start);
-            // The span starts after the run's `keep`-th kept row.
-            let mut seen = 0;
-            let mut start = r.end;
-            let mut prev = r.start.checked_sub(1).and_then(|j| samples.get(j));
-            for (j, s) in samples
-                .get(r.start..r.end)
-                .unwrap_or(&[])
-                .iter()
-                .enumerate()
-            {
-                if check::<T, S>(s, prev, rules).is_ok() {
-                    seen += 1;
-                    if seen == keep {
-                        start = r.start + j + 1;
-                        break;
-                    }
-                }
-                prev = Some(s);
-            }
+        // In the order of the runs kept (not time order: the passes'
+        // pieces do not need it).
+        for r in runs.iter().filter(|r| still(r, keep)) {
+            let start = r.start.saturating_add(keep);
             if start < r.end {
                 if let Some(slot) = dwell.spans.get_mut(dwell.len) {
                     *slot = (start, r.end);
                     dwell.len += 1;
-                    dwell.rows += r.kept.saturating_sub(keep);
                 }
             }
         }
         dwell
+    }
+}
+
+/// Counts `rows` set aside (the caller's count of the rows of the spans
+/// that the rules keep).
+impl Dwell {
+    pub(crate) fn set_rows(&mut self, rows: usize) {
+        self.rows = rows;
     }
 }
 
@@ -368,8 +350,9 @@ mod tests {
     }
 
     fn dwell_of(rows: &[[f64; 3]]) -> Dwell {
-        let rules = Rules::<f64>::GLITCHES;
-        let found = detect(rows, &rules);
+        use crate::steps::rules::Rules;
+        let gate = Gate::of(Rules::<f64>::GLITCHES, &Dwell::NONE);
+        let found = detect(rows, &gate);
         // The spread of the rows about their mean.
         let n = rows.len() as f64;
         let mean: Vec<f64> = (0..3)
@@ -380,7 +363,10 @@ mod tests {
             .map(|r| (0..3).map(|a| (r[a] - mean[a]).powi(2)).sum::<f64>())
             .sum::<f64>()
             / n;
-        found.decide(rows, &rules, var.sqrt())
+        let mut d = found.decide(var.sqrt());
+        let rows = d.spans().iter().map(|&(s, e)| e - s).sum();
+        d.set_rows(rows);
+        d
     }
 
     #[test]
@@ -392,7 +378,9 @@ mod tests {
         // max(4, 600 / 48) = 12, give or take the rows the runs take
         // from the motion).
         assert_eq!(d.spans().len(), 2, "{d:?}");
-        let [(s0, e0), (s1, e1)] = [d.spans()[0], d.spans()[1]];
+        let mut spans = d.spans().to_vec();
+        spans.sort();
+        let [(s0, e0), (s1, e1)] = [spans[0], spans[1]];
         assert!(s0 <= 20 && (1190..=1210).contains(&e0), "{d:?}");
         assert!((1800..=1830).contains(&s1) && e1 == rows.len(), "{d:?}");
         assert!(d.rows() > 2300 && !d.whole());

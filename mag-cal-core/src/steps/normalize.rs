@@ -219,7 +219,7 @@ fn set_aside<T: Real, S: Sample>(
     o: [T; 3],
     sums: &mut Sums<T>,
 ) -> Dwell {
-    let found = dwell::detect(samples, &gate.rules);
+    let found = dwell::detect(samples, gate);
     // The spread of every row kept: the RMS distance from their mean.
     let n = T::from_count(sums.used);
     let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
@@ -229,7 +229,8 @@ fn set_aside<T: Real, S: Sample>(
     } else {
         T::zero()
     };
-    let dwell = found.decide(samples, &gate.rules, spread);
+    let mut dwell = found.decide(spread);
+    let used = sums.used;
     for &(s, e) in dwell.spans() {
         let prev = s.checked_sub(1).and_then(|j| samples.get(j));
         let part = sums_about(samples.get(s..e).unwrap_or(&[]), prev, o, gate);
@@ -239,6 +240,7 @@ fn set_aside<T: Real, S: Sample>(
         }
         sums.sum_sq -= part.sum_sq;
     }
+    dwell.set_rows(used.saturating_sub(sums.used));
     dwell
 }
 
