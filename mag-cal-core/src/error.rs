@@ -22,14 +22,13 @@ pub enum Error {
     /// Every finite sample is the same point: there is no spread to fit.
     AllSamplesEqual,
     /// The device hardly moved: beside the rows of its still periods
-    /// (set aside, [`crate::steps::dwell`]) too few rows are left, or one
-    /// still period holds nearly every row and no fit was found.
+    /// (set aside, [`crate::steps::dwell`]) too few rows are left.
     HardlyMoved {
         /// Rows in motion (outside the still periods, or the longest one).
         moving: usize,
         /// Rows lying still (set aside, or in the longest still period).
         still: usize,
-        /// Rows in motion required (`0`: the fit was refused).
+        /// Rows in motion required (`0`: a fit of them was refused).
         required: usize,
     },
     /// The samples' spread cannot be represented in the working precision:

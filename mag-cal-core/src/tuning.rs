@@ -450,6 +450,22 @@ pub(crate) const PRIOR_WEIGHT: f32 = 0.001;
 /// within 0.31 %, field strength 0.26 %, M 1.06 % of the fit without them;
 /// a global noise (the median second difference) was not varied further.
 pub(crate) const DWELL_EMA: f64 = 1.0 / 16.0;
+/// The detection reads every this-many-th row (its runs and counts in
+/// rows of the recording). Guards: the rule as measured (every row).
+/// Every 4th row with an average weight of 1/8 halved the pass's cost but
+/// set aside motion: `icm20948_mag_300.csv` with 600 still rows at each
+/// end M 1.8 % off, `mag3_raw_541.csv` as it is 36 rows set aside (`cargo
+/// test --release -p host-tests --test still_periods`).
+pub(crate) const DWELL_STRIDE: usize = 1;
+/// A row's mean absolute second difference enters the noise's average at
+/// most at this many times the average. Guards: a spike (one wild row)
+/// does not inflate the radius of the rows after it, which then formed one
+/// long run of motion set aside as still (the contamination table's spike
+/// cells: median error ratios 1.00 -> 1.19-1.32 without the clip).
+///
+/// Set with issue 36's core rule. Evidence: `cargo run --release -p
+/// host-tests --bin contamination-table -- 64`; 4 alone tried.
+pub(crate) const DWELL_CLIP: f64 = 4.0;
 /// The mean absolute second difference `x[i] - 2 x[i-1] + x[i-2]` of white
 /// noise of standard deviation 1: `sqrt(6) sqrt(2 / pi)`. Guards: the
 /// local noise in units of the noise's standard deviation.
@@ -505,4 +521,4 @@ pub(crate) const DWELL_LONG: usize = 3;
 ///
 /// Set with issue 36's core rule; by the reasoning above (the unit test
 /// `rows_out_of_time_order_are_not_still`), no other value measured.
-pub(crate) const DWELL_SCALE: f64 = 1.0;
+pub(crate) const DWELL_SCALE: f64 = 0.5;

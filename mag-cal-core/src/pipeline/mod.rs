@@ -78,36 +78,13 @@ fn pipeline<T: Real, S: Sample>(
     let fit = plain_path(samples, config, &scan, ls_solve, step);
     #[cfg(feature = "robust")]
     let fit = robust_pipeline(samples, config, &scan, ls_solve, step);
-    fit.map_err(|e| hardly_moved(&scan.dwell, e))
-}
-
-/// A refusal of the shape of rows that lie in one time run nearly all (a
-/// device that never moved, [`crate::steps::dwell`]) is refused as
-/// [`Error::HardlyMoved`]: the cause is the missing motion.
-#[inline(never)]
-fn hardly_moved(dwell: &crate::Dwell, e: Error) -> Error {
-    let shape = matches!(
-        e,
-        Error::NoSphere { .. }
-            | Error::Planar { .. }
-            | Error::NotAnEllipsoid
-            | Error::SingularSystem
-            | Error::FilledCloud { .. }
-            | Error::AmbiguousQuadric { .. }
-            | Error::PoorCoverage { .. }
-            | Error::ExtremeDistortion { .. }
-            | Error::SystematicMisfit { .. }
-    );
-    if shape && dwell.whole() {
-        let (moving, still) = dwell.moved();
-        Error::HardlyMoved {
-            moving,
-            still,
-            required: 0,
-        }
-    } else {
-        e
-    }
+    // A device that never moved: a recording that is one time run nearly
+    // whole (`dwell::never_moved`) is not told from rows out of time order
+    // (a shuffled sphere is one run too), so its refusal keeps its cause
+    // (NoSphere for the contamination table's stationary and noise-ball
+    // kinds); only too few rows left beside still periods is refused as
+    // `Error::HardlyMoved` (in the scan).
+    fit
 }
 
 /// [`pipeline`] after the scan, with outlier handling compiled in: the
