@@ -496,12 +496,17 @@ pub(crate) const DWELL_MIN_RUN: usize = 16;
 pub(crate) const DWELL_KEEP: usize = 4;
 /// A still period keeps `n_motion / DWELL_SHARE` of its rows when that is
 /// more than [`DWELL_KEEP`] (`n_motion`: the rows not set aside). Guards:
-/// the still direction weighs as a 48th of the motion, about what one
-/// direction bin of the sphere holds; and a device that never moved keeps
+/// the still direction weighs as a 64th of the motion, about what one
+/// direction bin of the sphere holds; and a device that hardly moved keeps
 /// too few rows to be fitted ([`crate::Error::HardlyMoved`]).
 ///
-/// Set at `1e1b99f`. Evidence: the `still-probe` command of [`DWELL_EMA`]
-/// (`SHARE=48`; 64 moved icm20948's M by more).
+/// Set with issue 36's core rule (the prototype at `1e1b99f`, branch
+/// `still`, had 48). Evidence: `cargo test --release -p host-tests --test
+/// still_periods -- --nocapture`: with 48 `icm20948_mag_300.csv` with
+/// still ends moved M by 0.83 % (one count) to 1.087 % (5x, 3 % noise,
+/// beyond the 1 % target); with 64, 0.42 % and 0.62 % (worst of all
+/// recordings 0.84 %); `imu_gnss_1252.csv` as it is needs K >= 18 (its
+/// still start of 80 rows) to keep 5 % of its rows.
 pub(crate) const DWELL_SHARE: usize = 64;
 /// A run is a still period only when it holds at least this many times
 /// the rows it keeps (`K`): a short pause in a long recording, which would
@@ -516,9 +521,13 @@ pub(crate) const DWELL_LONG: usize = 3;
 /// times the spread of the rows (their RMS distance from their mean).
 /// Guards: rows out of time order (shuffled or interleaved), whose second
 /// differences are as large as their spread (radius about 3.5 spreads):
-/// every row would lie in one run. Still ends of 10x the motion at 3 %
-/// noise: about 0.6 spreads.
+/// every row would lie in one run; and contaminated rows whose noise is
+/// inflated (displaced rows). Still ends of 10x the motion at 3 % noise:
+/// about 0.6 spreads at worst, 0.2-0.4 mostly.
 ///
-/// Set with issue 36's core rule; by the reasoning above (the unit test
-/// `rows_out_of_time_order_are_not_still`), no other value measured.
+/// Set with issue 36's core rule. Evidence: `cargo run --release -p
+/// host-tests --bin contamination-table -- 64`: robust ADC2 f32 runs
+/// silently wrong 15 (main) -> 55 at 1.0 (displace-1 20-30 %), 28 at 0.5
+/// (clip 30 % left: an open question); `cargo test --release -p host-tests
+/// --test still_periods` unchanged by either.
 pub(crate) const DWELL_SCALE: f64 = 0.5;
