@@ -122,7 +122,9 @@ impl Counts {
         for class in classes {
             match class {
                 SampleClass::Used => c.used += 1,
-                SampleClass::Dropped(_) => c.dropped += 1,
+                // Still rows set aside are not drawn yet (issue 36's front
+                // ends): counted with the dropped ones.
+                SampleClass::Dropped(_) | SampleClass::Dwell => c.dropped += 1,
                 SampleClass::Screened => c.screened += 1,
                 SampleClass::Rejected => c.rejected += 1,
             }

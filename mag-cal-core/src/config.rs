@@ -51,6 +51,15 @@ pub struct Config {
     /// data) both give the same result; dropping the glitch rules with the
     /// feature, or refusing the default configuration, would surprise more.
     pub robust: bool,
+    /// Still periods (default `true`): the rows of a device lying still,
+    /// beyond the first few of each still period, are set aside before any
+    /// fit ([`SampleClass::Dwell`](crate::SampleClass::Dwell), counted in
+    /// [`Report::dwell`](crate::Report::dwell)), so that a log that starts
+    /// and ends lying still calibrates like its motion alone; a device that
+    /// hardly moved is refused as
+    /// [`Error::HardlyMoved`](crate::Error::HardlyMoved). `false` fits every
+    /// row the rules keep, as before the rule existed. In both builds.
+    pub still: bool,
     /// The judging limits (default [`Thresholds::DEFAULT`](crate::Thresholds::DEFAULT), the measured
     /// constants of [`quality`](crate::quality)).
     pub thresholds: Thresholds,
@@ -68,6 +77,7 @@ impl Config {
         noise_covariance: None,
         expected_field_strength: None,
         robust: true,
+        still: true,
         thresholds: Thresholds::DEFAULT,
     };
 }

@@ -21,6 +21,16 @@ pub enum Error {
     },
     /// Every finite sample is the same point: there is no spread to fit.
     AllSamplesEqual,
+    /// The device hardly moved: beside the rows of its still periods
+    /// (set aside, [`crate::steps::dwell`]) too few rows are left.
+    HardlyMoved {
+        /// Rows in motion (outside the still periods, or the longest one).
+        moving: usize,
+        /// Rows lying still (set aside, or in the longest still period).
+        still: usize,
+        /// Rows in motion required (`0`: a fit of them was refused).
+        required: usize,
+    },
     /// The samples' spread cannot be represented in the working precision:
     /// squares overflow (values near `1e30` in `f32`), or the spread is
     /// subnormal and carries too few significant bits.
@@ -155,6 +165,26 @@ impl fmt::Display for Error {
                 "too few usable samples: {found} kept, at least {required} required"
             ),
             Error::AllSamplesEqual => f.write_str("all samples are equal: no spread to fit"),
+            Error::HardlyMoved {
+                moving,
+                still,
+                required: 0,
+            } => write!(
+                f,
+                "the device hardly moved: {still} samples lie still in one place and {moving} \
+                 others do not determine a calibration: turn the sensor through all \
+                 orientations while recording"
+            ),
+            Error::HardlyMoved {
+                moving,
+                still,
+                required,
+            } => write!(
+                f,
+                "the device hardly moved: {moving} samples in motion, at least {required} \
+                 required ({still} more lay still): turn the sensor through all orientations \
+                 while recording"
+            ),
             Error::OutOfRange => f.write_str(
                 "sample spread outside the range of the working precision (overflow or subnormal)",
             ),
@@ -526,6 +556,7 @@ mod tests {
     fn figure_and_limit(e: &Error) -> Option<(f32, f32)> {
         match *e {
             Error::TooFewSamples { .. }
+            | Error::HardlyMoved { .. }
             | Error::AllSamplesEqual
             | Error::OutOfRange
             | Error::NotAnEllipsoid
@@ -588,6 +619,7 @@ mod tests {
     variants!(
         TooFewSamples,
         AllSamplesEqual,
+        HardlyMoved,
         OutOfRange,
         NotAnEllipsoid,
         SingularSystem,
@@ -678,6 +710,16 @@ mod tests {
                 required: 10
             },
             Error::AllSamplesEqual,
+            Error::HardlyMoved {
+                moving: 6,
+                still: 2400,
+                required: 10
+            },
+            Error::HardlyMoved {
+                moving: 30,
+                still: 2400,
+                required: 0
+            },
             Error::OutOfRange,
             Error::NotAnEllipsoid,
             Error::SingularSystem,
@@ -878,6 +920,15 @@ mod tests {
                 }
                 .to_string(),
                 ["9 kept", "10 required"],
+            ),
+            (
+                Error::HardlyMoved {
+                    moving: 6,
+                    still: 2400,
+                    required: 10,
+                }
+                .to_string(),
+                ["6 samples in motion", "at least 10"],
             ),
             #[cfg(feature = "robust")]
             (

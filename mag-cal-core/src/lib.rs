@@ -297,6 +297,7 @@ pub use report::{Fit, Report};
 pub use robust::runs;
 pub use robust::runs::Runs;
 pub use sample::{Sample, SampleStore};
+pub use steps::dwell::Dwell;
 pub use steps::ellipsoid::LsVariant;
 pub use steps::methods::Method;
 pub use steps::normalize::MIN_SAMPLES;

@@ -7,8 +7,8 @@ use crate::{Calibration, Drops, LsVariant, Method, Quality, Real, Runs, Selectio
 /// How a calibration was obtained, and how well it fits.
 ///
 /// Every row of the input is counted once:
-/// `samples_used + samples_dropped + screened + rejected` is the input's
-/// length.
+/// `samples_used + samples_dropped + dwell + screened + rejected` is the
+/// input's length.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub struct Report<T: Real> {
@@ -34,6 +34,10 @@ pub struct Report<T: Real> {
     pub samples_dropped: usize,
     /// Rows dropped by each rule.
     pub drops: Drops,
+    /// Rows kept by the rules but set aside as still periods beyond their
+    /// first rows ([`crate::steps::dwell`], [`crate::SampleClass::Dwell`]):
+    /// not outliers, and not counted by the outlier share.
+    pub dwell: usize,
     /// Rows kept by the rules but screened out: too far from the others.
     pub screened: usize,
     /// Rows kept and inside the screening, rejected by their residual or
@@ -85,6 +89,7 @@ impl<T: Real> Report<T> {
             let rows = self
                 .samples_used
                 .saturating_add(self.samples_dropped)
+                .saturating_add(self.dwell)
                 .saturating_add(self.screened)
                 .saturating_add(self.rejected);
             refit::window(usize::from(self.start), rows)

@@ -435,3 +435,101 @@ pub(crate) const MEMORY: usize = 5;
 ///
 /// Set at `2930d02`. Evidence: none recorded: it only keeps the collector's centre solve regular on few directions; an open question.
 pub(crate) const PRIOR_WEIGHT: f32 = 0.001;
+
+// ---- Still periods (`steps::dwell`, issue 36) ----
+
+/// Weight of the newest row in the moving average of the local noise (the
+/// mean absolute second difference over the axes): about the last 16
+/// rows. Guards: the noise of the still period itself, not of the motion
+/// before it, sets the radius of its run.
+///
+/// Set at `1e1b99f` (branch `still`, the host prototype). Evidence:
+/// `LOCAL=1 L0=16 K0=4 SHARE=48 cargo run --release -p host-tests --bin
+/// still-probe -- 6 runs` on the shared recordings with still ends of
+/// 0.5x-10x the motion, noise 1 count to 3 % of the field: no refusal, b
+/// within 0.31 %, field strength 0.26 %, M 1.06 % of the fit without them;
+/// a global noise (the median second difference) was not varied further.
+pub(crate) const DWELL_EMA: f64 = 1.0 / 16.0;
+/// The detection reads every this-many-th row (its runs and counts in
+/// rows of the recording). Guards: the rule as measured (every row).
+/// Every 4th row with an average weight of 1/8 halved the pass's cost but
+/// set aside motion: `icm20948_mag_300.csv` with 600 still rows at each
+/// end M 1.8 % off, `mag3_raw_541.csv` as it is 36 rows set aside (`cargo
+/// test --release -p host-tests --test still_periods`).
+pub(crate) const DWELL_STRIDE: usize = 1;
+/// A row's mean absolute second difference enters the noise's average at
+/// most at this many times the average. Guards: a spike (one wild row)
+/// does not inflate the radius of the rows after it, which then formed one
+/// long run of motion set aside as still (the contamination table's spike
+/// cells: median error ratios 1.00 -> 1.19-1.32 without the clip).
+///
+/// Set with issue 36's core rule. Evidence: `cargo run --release -p
+/// host-tests --bin contamination-table -- 64`; 4 alone tried.
+pub(crate) const DWELL_CLIP: f64 = 4.0;
+/// The mean absolute second difference `x[i] - 2 x[i-1] + x[i-2]` of white
+/// noise of standard deviation 1: `sqrt(6) sqrt(2 / pi)`. Guards: the
+/// local noise in units of the noise's standard deviation.
+///
+/// Set at `1e1b99f`: by derivation, not by measurement.
+pub(crate) const DWELL_NOISE: f64 = 1.955;
+/// A row farther than this many local sigmas (Euclidean) from the mean of
+/// the run so far starts a new run. Guards: noise does not break a still
+/// period (a 3-D Gaussian row beyond 6 sigma: 1e-7), and a device that
+/// moves by more than the noise between rows is not still.
+///
+/// Set at `1e1b99f`. Evidence: the `still-probe` command of [`DWELL_EMA`]
+/// (radius 6 its first argument; 4 split the noisier still ends).
+pub(crate) const DWELL_RADIUS: f64 = 6.0;
+/// A run of at least this many rows is a still period. Guards: a slow
+/// turn's runs of a few rows are not set aside (every shared recording as
+/// it is: none set aside).
+///
+/// Set at `1e1b99f`. Evidence: the `still-probe` command of
+/// [`DWELL_EMA`] (`L0=16`); `cargo run --release -p host-tests --bin
+/// still-stats` (runs of the shared recordings).
+pub(crate) const DWELL_MIN_RUN: usize = 16;
+/// A still period keeps at least this many of its first rows. Guards: the
+/// direction it lies at still counts, as one direction among the motion's.
+///
+/// Set at `1e1b99f`. Evidence: the `still-probe` command of [`DWELL_EMA`]
+/// (`K0=4`; 8 moved M by more on short recordings).
+pub(crate) const DWELL_KEEP: usize = 4;
+/// A still period keeps `n_motion / DWELL_SHARE` of its rows when that is
+/// more than [`DWELL_KEEP`] (`n_motion`: the rows not set aside). Guards:
+/// the still direction weighs as a 64th of the motion, about what one
+/// direction bin of the sphere holds; and a device that hardly moved keeps
+/// too few rows to be fitted ([`crate::Error::HardlyMoved`]).
+///
+/// Set with issue 36's core rule (the prototype at `1e1b99f`, branch
+/// `still`, had 48). Evidence: `cargo test --release -p host-tests --test
+/// still_periods -- --nocapture`: with 48 `icm20948_mag_300.csv` with
+/// still ends moved M by 0.83 % (one count) to 1.087 % (5x, 3 % noise,
+/// beyond the 1 % target); with 64, 0.42 % and 0.62 % (worst of all
+/// recordings 0.84 %); `imu_gnss_1252.csv` as it is needs K >= 18 (its
+/// still start of 80 rows) to keep 5 % of its rows.
+pub(crate) const DWELL_SHARE: usize = 64;
+/// A run is a still period only when it holds at least this many times
+/// the rows it keeps (`K`): a short pause in a long recording, which would
+/// lose few rows, keeps them all.
+///
+/// Set with issue 36's core rule. Evidence: `cargo test --release -p
+/// host-tests --test still_periods -- --nocapture` (`imu_gnss_1252.csv`
+/// as it is: a still start of 80 rows and pauses of 26-48 rows; with
+/// every run of 16 rows a still period, 91 rows, 7.3 %, were set aside).
+pub(crate) const DWELL_LONG: usize = 3;
+/// A run is a still period only when its radius is at most this many
+/// times the spread of the rows (their RMS distance from their mean).
+/// Guards: rows out of time order (shuffled or interleaved), whose second
+/// differences are as large as their spread (radius about 3.5 spreads):
+/// every row would lie in one run; and contaminated rows whose noise is
+/// inflated (displaced rows). Still ends of 10x the motion at 3 % noise:
+/// about 0.6 spreads at worst, 0.2-0.4 mostly.
+///
+/// Set with issue 36's core rule. Evidence: `cargo run --release -p
+/// host-tests --bin contamination-table -- 64`: robust ADC2 f32 runs
+/// silently wrong 15 (main) -> 55 at 1.0 (displace-1 20-30 %), 28 at 0.5,
+/// 19 at 0.35, 16 at 0.25 (mostly clip 30 %: an open question); `cargo
+/// test --release -p host-tests --test still_periods`: passes at 0.35 and
+/// above, at 0.25 `icm20948_mag_300.csv` with still ends of 5x at 3 %
+/// noise is refused (NoSphere 0.43).
+pub(crate) const DWELL_SCALE: f64 = 0.35;

@@ -368,13 +368,14 @@ fn calibration_with(timer: &Timer, name: &str, samples: &[[i16; 3]], cfg: &Confi
             report(name, samples.len(), count);
             let r = &fit.report;
             println!(
-                "# {=str} n={=usize}: iterations={=u32} passes={=u32} robust_passes={=u32} dropped={=usize} screened={=usize} rejected={=usize} radial_rms={=f32} fit_error={=f32} lack_of_fit={=f32}",
+                "# {=str} n={=usize}: iterations={=u32} passes={=u32} robust_passes={=u32} dropped={=usize} dwell={=usize} screened={=usize} rejected={=usize} radial_rms={=f32} fit_error={=f32} lack_of_fit={=f32}",
                 name,
                 samples.len(),
                 r.iterations,
                 r.passes,
                 r.robust_passes,
                 r.samples_dropped,
+                r.dwell,
                 r.screened,
                 r.rejected,
                 r.radial_rms,

@@ -408,6 +408,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
+        dwell: &scanned.dwell,
     };
     let mut passes = SCAN_PASSES + screening.passes;
     let norm = screening.norm;
@@ -651,7 +652,7 @@ const SCAN_PASSES: u32 = 2;
 /// The rows a pass visits, in normalised coordinates `(y - c) / m`.
 struct Rows<'a, T: Real, S: Sample> {
     samples: &'a [S],
-    gate: &'a Gate<T>,
+    gate: &'a Gate<'a, T>,
     centre: [T; 3],
     inv_scale: T,
 }

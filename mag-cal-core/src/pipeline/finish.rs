@@ -104,7 +104,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     #[cfg(feature = "robust")]
     let spanned = {
         let mut spanned = 0usize;
-        runs.visit(samples, |s, prev| {
+        runs.visit(samples, start.weights.gate.dwell, |s, prev| {
             if let Some(y) = start.weights.gate.pass(s, prev) {
                 spanned += 1;
                 let within = limit.is_none_or(|l| {
@@ -147,6 +147,7 @@ pub(super) fn finish<T: Real, S: Sample>(
         samples_used: last.used,
         samples_dropped: figures.drops.total(),
         drops: figures.drops,
+        dwell: start.weights.gate.dwell.rows(),
         screened: figures
             .valid
             .saturating_sub(last.passed)
@@ -180,6 +181,7 @@ pub(super) fn finish<T: Real, S: Sample>(
             screen: None,
             residual_limit: limit,
             runs: *runs,
+            dwell: *start.weights.gate.dwell,
         },
         start: start.start,
     };

@@ -77,20 +77,17 @@ pub(super) fn plain_path<T: Real, S: Sample>(
 /// figures they give (into `figures`). Out of line, as `robust_start`:
 /// the moments take stack only until the method starts.
 #[inline(never)]
-pub(super) fn plain_start<T: Real, S: Sample>(
+pub(super) fn plain_start<'s, T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
-    scan: &normalize::Scan<T>,
+    scan: &'s normalize::Scan<T>,
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
-) -> Result<Start<'static, T>, Error> {
+) -> Result<Start<'s, T>, Error> {
     let norm = scan.norm;
     // The rows the rules dropped stay out; without drops the scan's rules
     // are plain, and so are the loops.
-    let gate = rules::Gate {
-        rules: scan.rules,
-        screen: None,
-    };
+    let gate = rules::Gate::of(scan.rules, &scan.dwell);
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {

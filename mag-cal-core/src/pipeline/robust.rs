@@ -217,7 +217,7 @@ pub(super) fn finish_fit<T: Real, S: Sample>(
 pub(super) fn robust_start<'r, T: Real, S: Sample>(
     samples: &[S],
     config: &Config,
-    scan: &normalize::Scan<T>,
+    scan: &'r normalize::Scan<T>,
     screened: Option<&screen::Screening<T>>,
     ls_solve: ellipsoid::Solve<T>,
     figures: &mut Figures<T>,
@@ -242,7 +242,15 @@ pub(super) fn robust_start<'r, T: Real, S: Sample>(
         }
     };
     start_from(
-        samples, config, screening, passes, ls_solve, figures, runs, k,
+        samples,
+        config,
+        screening,
+        passes,
+        ls_solve,
+        figures,
+        runs,
+        k,
+        &scan.dwell,
     )
 }
 
@@ -260,6 +268,7 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
     figures: &mut Figures<T>,
     runs: &'r mut runs::Runs,
     k: usize,
+    dwell: &'r crate::Dwell,
 ) -> Result<Start<'r, T>, Error> {
     let window = &refit::window(k, samples.len());
     figures.drops = screening.drops;
@@ -267,6 +276,7 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
     let gate = rules::Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
+        dwell,
     };
     let fitted = match refit::robust_ls(
         samples,

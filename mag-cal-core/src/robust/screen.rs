@@ -45,7 +45,7 @@ use crate::sample::Sample;
 use crate::steps::methods::MAD_TO_SIGMA;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Scan};
-use crate::steps::rules::{check, count_drops, every, pieces, Ball, Drops, Gate, Rules};
+use crate::steps::rules::{check, count_drops, every, Ball, Drops, Gate, Rules};
 use crate::tuning::{
     CLIP_HINT_ROWS, CLIP_MIN_ROWS, CLIP_SHARE, CRUDE_SHARE, MAX_LEVELS, RECENTRE_GAIN,
     RECENTRE_MORE_ROWS, RECENTRE_RADIUS, RESOLVED_BINS, SCREEN_RADIUS, SUBSAMPLE_ROWS,
@@ -181,10 +181,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     scan: &Scan<T>,
 ) -> Result<Screening<T>, Unscreened> {
     let (centre, spread, rules, mut passes) = median_centre(samples, scan);
-    let gate = Gate {
-        rules,
-        screen: None,
-    };
+    let gate = Gate::of(rules, &scan.dwell);
     if !(spread > T::zero()) || !spread.is_finite() {
         return Err(Unscreened::AllEqual);
     }
@@ -212,7 +209,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     // the ball. The algebraic sphere fit does not depend on coverage; it
     // replaces the median centre when its sphere fits the shell much
     // better (see `recentre`).
-    let median_sphere = shell(samples, rules, centre, m, every);
+    let median_sphere = shell(samples, &gate, centre, m, every);
     passes += 1;
     let enough_more = |inside: u32| {
         inside.saturating_sub(median_sphere.inside) >= median_sphere.inside / RECENTRE_MORE_ROWS
@@ -230,7 +227,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
         k.error < T::lit(RECENTRE_GAIN) * median_sphere.error && enough_more(k.inside)
     };
     let chosen = kasa
-        .map(|(c, r)| shell(samples, rules, c, r, every))
+        .map(|(c, r)| shell(samples, &gate, c, r, every))
         .filter(better);
     passes += u32::from(kasa.is_some());
     let Shell {
@@ -289,7 +286,7 @@ struct Shell<T: Real> {
 #[inline(never)]
 fn shell<T: Real, S: Sample>(
     samples: &[S],
-    rules: Rules<T>,
+    gate: &Gate<T>,
     centre: [T; 3],
     m: T,
     every: usize,
@@ -299,8 +296,8 @@ fn shell<T: Real, S: Sample>(
         radius_sq: m * m * T::lit(SCREEN_RADIUS * SCREEN_RADIUS),
     };
     let inside = Gate {
-        rules,
         screen: Some(ball),
+        ..*gate
     };
     let mut h = LogHistogram::new();
     distances(samples, &inside, centre, T::one() / m, every, true, &mut h);
@@ -380,10 +377,7 @@ fn recentre<T: Real, S: Sample>(
 /// in the first pass (rows at the scan's extremes, `CLIP_SHARE`),
 /// and the passes it took.
 fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
-    let rows = Gate {
-        rules: scan.rules,
-        screen: None,
-    };
+    let rows = Gate::of(scan.rules, &scan.dwell);
     // The window of the first histograms: the bounds of the subsample
     // (rows beyond them count below or above the window; a clip level is
     // an extreme that many rows share, so the subsample has it too).
@@ -406,10 +400,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     let mut rules = scan.rules;
     while passes < MAX_LEVELS && !done.iter().all(|&d| d) {
         let mut h = AxisHistograms::new(lo, hi);
-        let gate = Gate {
-            rules,
-            screen: None,
-        };
+        let gate = Gate::of(rules, &scan.dwell);
         // One pass fills the histograms; the first also counts per axis
         // the rows at the smallest and the largest value of the bounds
         // (the candidate clip levels).
@@ -572,7 +563,7 @@ fn visit<T: Real, S: Sample>(
     stride: usize,
     f: &mut dyn FnMut([T; 3]),
 ) {
-    for (prev, block) in pieces(samples, piece) {
+    for (_, prev, block) in gate.pieces(&crate::Runs::NONE, samples, piece) {
         for (_, s, last) in every(block, prev, stride) {
             if let Some(y) = gate.pass(s, last) {
                 f(y);
@@ -634,10 +625,7 @@ mod tests {
         });
         let hint = |rows: &[[i16; 3]]| {
             let s = scan::<f32, [i16; 3]>(rows, true).unwrap();
-            let gate = Gate {
-                rules: s.rules,
-                screen: None,
-            };
+            let gate = Gate::of(s.rules, &s.dwell);
             clip_hint(rows, &gate, s.used)
         };
         assert!(!hint(&sphere));

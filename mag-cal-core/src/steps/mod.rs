@@ -4,6 +4,7 @@
 //! final pass's figures.
 
 pub mod artificial;
+pub mod dwell;
 pub mod ellipsoid;
 pub mod final_pass;
 pub mod methods;

@@ -8,6 +8,7 @@
 use nalgebra::Vector3;
 
 use crate::sample::Sample;
+use crate::steps::dwell::{self, Dwell};
 use crate::steps::rules::{check, count_drops, Drops, Gate, Rules};
 use crate::{Error, Real};
 
@@ -60,6 +61,9 @@ pub(crate) struct Scan<T: Real> {
     /// The rules the later passes apply: the glitch rules only when they
     /// dropped a row here, and no clip levels (screening finds those).
     pub rules: Rules<T>,
+    /// The still periods set aside ([`crate::steps::dwell`]): `used` and
+    /// the normalisation leave them out.
+    pub dwell: Dwell,
 }
 
 /// One pass over the samples: applies the drop rules (the glitch rules
@@ -71,6 +75,16 @@ pub(crate) struct Scan<T: Real> {
 /// far outside the cloud; that case is detected and the spread recomputed
 /// in a second pass around the now-known mean.
 pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<Scan<T>, Error> {
+    scan_still(samples, glitches, false)
+}
+
+/// [`scan`] that, with `still`, also sets the still periods aside
+/// ([`crate::steps::dwell`]: one pass more, over the rows the rules keep).
+pub(crate) fn scan_still<T: Real, S: Sample>(
+    samples: &[S],
+    glitches: bool,
+    still: bool,
+) -> Result<Scan<T>, Error> {
     let zero = T::zero();
     // The rules first, in a loop of their own (integer compares for integer
     // samples): when nothing is dropped, the sums take the plain loop.
@@ -91,6 +105,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
             rules
         },
         screen: None,
+        dwell: &Dwell::NONE,
     };
     // The first kept sample is the origin; the loop runs over the rest.
     let mut prev = None;
@@ -117,14 +132,27 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
         sums = sums_about(rest, before_rest, o, &gate, gate.plain_loop());
         sums.used += 1;
     }
+    // The still periods: their rows leave the sums (hook, issue 36).
+    let dwell = match origin {
+        Some(o) if still => set_aside(samples, &gate, o, &mut sums),
+        _ => Dwell::NONE,
+    };
     let Sums { used, sum, sum_sq } = sums;
-    if used + drops.total() != samples.len() {
+    if used + dwell.rows() + drops.total() != samples.len() {
         // Non-finite rows in the plain pipeline (which counts after the
         // sums); with the glitch rules this cannot happen, as both loops
         // apply the same rules.
         drops = count_drops::<T, S>(samples, &gate.rules);
     }
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
+        if dwell.rows() > 0 {
+            // Too few rows left beside the still periods.
+            return Err(Error::HardlyMoved {
+                moving: used,
+                still: dwell.rows(),
+                required: MIN_SAMPLES,
+            });
+        }
         if drops.overflow * 2 > drops.total() {
             // Most rows are too large to compute with.
             return Err(Error::OutOfRange);
@@ -179,7 +207,48 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
             glitches: rules.glitches && drops.glitches() > 0,
             ..rules
         },
+        dwell,
     })
+}
+
+/// The still periods of the rows `gate` passes ([`dwell::detect`]), whose
+/// rows are then taken out of `sums` (about the origin `o`).
+#[inline(never)]
+fn set_aside<T: Real, S: Sample>(
+    samples: &[S],
+    gate: &Gate<T>,
+    o: [T; 3],
+    sums: &mut Sums<T>,
+) -> Dwell {
+    let found = dwell::detect(samples, gate);
+    // The spread of every row kept: the RMS distance from their mean.
+    let n = T::from_count(sums.used);
+    let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
+    let var = sums.sum_sq / n - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+    let spread = if var > T::zero() {
+        var.square_root()
+    } else {
+        T::zero()
+    };
+    let mut dwell = found.decide(spread);
+    let used = sums.used;
+    for &(s, e) in dwell.spans() {
+        let prev = s.checked_sub(1).and_then(|j| samples.get(j));
+        let part = sums_about(
+            samples.get(s..e).unwrap_or(&[]),
+            prev,
+            o,
+            gate,
+            gate.plain_loop(),
+        );
+        sums.used = sums.used.saturating_sub(part.used);
+        for (t, p) in sums.sum.iter_mut().zip(part.sum) {
+            *t -= p;
+        }
+        sums.sum_sq -= part.sum_sq;
+    }
+    dwell.set_rows(used.saturating_sub(sums.used));
+    dwell
 }
 
 /// Count, `sum (y - o)` and `sum |y - o|^2` over the kept samples.

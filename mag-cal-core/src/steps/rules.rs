@@ -27,6 +27,7 @@
 
 use crate::robust::runs::Runs;
 use crate::sample::Sample;
+use crate::steps::dwell::Dwell;
 use crate::Real;
 
 /// Rows dropped before the fit, by rule.
@@ -241,26 +242,62 @@ impl<T: Real> Ball<T> {
     }
 }
 
-/// Which rows a pass uses: the rules, and the screening ball when the
-/// robust path set one.
+/// Which rows a pass uses: the rules, the screening ball when the
+/// robust path set one, and the still periods set aside
+/// ([`crate::steps::dwell`]), which the pass's pieces skip
+/// ([`Gate::pieces`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Gate<T: Real> {
+pub(crate) struct Gate<'d, T: Real> {
     /// The drop rules.
     pub rules: Rules<T>,
     /// Samples outside are screened out.
     pub screen: Option<Ball<T>>,
+    /// The spans of still rows set aside. By reference: gates are copied
+    /// into the methods' frames.
+    pub dwell: &'d Dwell,
 }
 
-impl<T: Real> Gate<T> {
+impl<T: Real> Gate<'static, T> {
     /// Every finite, representable row: the plain pipeline's.
     pub(crate) const PLAIN: Self = Self {
         rules: Rules::PLAIN,
         screen: None,
+        dwell: &Dwell::NONE,
     };
+}
+
+impl<'d, T: Real> Gate<'d, T> {
+    /// The gate of `rules`, no ball, the still periods `dwell`.
+    pub(crate) const fn of(rules: Rules<T>, dwell: &'d Dwell) -> Self {
+        Self {
+            rules,
+            screen: None,
+            dwell,
+        }
+    }
 
     /// Whether the gate passes every finite, representable row.
     pub(crate) fn is_plain(&self) -> bool {
-        !self.rules.glitches && !self.rules.clipping && self.screen.is_none()
+        !self.rules.glitches
+            && !self.rules.clipping
+            && self.screen.is_none()
+            && self.dwell.is_empty()
+    }
+
+    /// The pieces of `samples` outside the still periods and the spans of
+    /// `skip`, each at most `size` rows, with its first row's index and
+    /// the row before it ([`Runs::pieces`]).
+    #[inline(always)]
+    pub(crate) fn pieces<'a, S>(
+        &self,
+        skip: &'a Runs,
+        samples: &'a [S],
+        size: usize,
+    ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a
+    where
+        'd: 'a,
+    {
+        skip.pieces_outside(self.dwell.spans(), samples, size)
     }
 
     /// Whether a pass over the rows the gate passes takes its plain loop
@@ -355,6 +392,9 @@ pub enum SampleClass {
     Dropped(Rule),
     /// The row lies too far from the others (screening).
     Screened,
+    /// The row is one of a still period's, beyond its first few: set aside
+    /// before any fit ([`crate::steps::dwell`]).
+    Dwell,
     /// The row's radial residual under the calibration exceeds the cut,
     /// or the row lies beside a run of such rows ([`crate::robust::runs`]).
     Rejected,
@@ -379,6 +419,9 @@ pub struct Selection<T: Real> {
     /// Rows in these spans, beside runs of rejected rows, were rejected
     /// too ([`crate::robust::runs`]).
     pub runs: Runs,
+    /// Rows in these spans, still periods beyond their first rows, were
+    /// set aside before any fit ([`SampleClass::Dwell`]).
+    pub dwell: Dwell,
 }
 
 impl<T: Real> Selection<T> {
@@ -389,6 +432,7 @@ impl<T: Real> Selection<T> {
         screen: None,
         residual_limit: None,
         runs: Runs::NONE,
+        dwell: Dwell::NONE,
     };
 
     pub(crate) fn rules(&self) -> Rules<T> {
@@ -405,13 +449,14 @@ impl<T: Real> Selection<T> {
         }
     }
 
-    pub(crate) fn gate(&self) -> Gate<T> {
+    pub(crate) fn gate(&self) -> Gate<'_, T> {
         Gate {
             rules: self.rules(),
             screen: self.screen.map(|(centre, r)| Ball {
                 centre,
                 radius_sq: r * r,
             }),
+            dwell: &self.dwell,
         }
     }
 
@@ -453,8 +498,10 @@ impl<T: Real> Selection<T> {
         let Gate {
             rules,
             screen: ball,
+            ..
         } = self.gate();
         let runs = self.runs;
+        let dwell = self.dwell;
         let mut prev = None;
         samples.iter().enumerate().map(move |(i, s)| {
             let row = check::<T, S>(s, prev, &rules);
@@ -463,6 +510,9 @@ impl<T: Real> Selection<T> {
                 Ok(y) => y,
                 Err(rule) => return SampleClass::Dropped(rule),
             };
+            if dwell.contains(i) {
+                return SampleClass::Dwell;
+            }
             if ball.is_some_and(|b| !b.contains(y)) {
                 return SampleClass::Screened;
             }
@@ -566,10 +616,7 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
     // Through the gate's out-of-line check, no ball: no second copy of
     // the rules for this loop (it runs with clip levels or on
     // floating-point rows).
-    let gate = Gate {
-        rules: *rules,
-        screen: None,
-    };
+    let gate = Gate::of(*rules, &Dwell::NONE);
     for s in samples {
         if let Err(Some(rule)) = gate.admit(s, prev) {
             drops.count(rule);
@@ -637,6 +684,7 @@ mod tests {
                 centre: [0.0; 3],
                 radius_sq: 12.5,
             }),
+            dwell: &Dwell::NONE,
         };
         // Piece boundary between the two equal rows: still a repeat; the
         // last row lies outside the ball (a ball is the robust path's:

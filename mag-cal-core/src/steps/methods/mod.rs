@@ -148,7 +148,7 @@ pub(crate) fn ls_only<T: Real, S: Sample>(
 /// `||u| - 1|` under each pass's start.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Weights<'r, T: Real> {
-    pub gate: Gate<T>,
+    pub gate: Gate<'r, T>,
     /// The spans of rows beside runs of rejected rows, skipped
     /// ([`crate::robust::runs`]). By reference: the weights are copied in the
     /// methods' frames, which are the deepest of the robust path.

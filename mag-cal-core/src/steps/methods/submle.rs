@@ -59,7 +59,7 @@ fn pack<T: Real>(a: &Matrix3<T>, b: &Vector3<T>) -> SVector<T, PARAMS> {
 pub struct SubMleObjective<'a, T: Real, S: Sample> {
     samples: &'a [S],
     norm: &'a Normalization<T>,
-    gate: Gate<T>,
+    gate: Gate<'a, T>,
     runs: Runs,
 }
 
@@ -69,7 +69,7 @@ impl<'a, T: Real, S: Sample> SubMleObjective<'a, T, S> {
     pub(crate) fn gated(
         samples: &'a [S],
         norm: &'a Normalization<T>,
-        gate: Gate<T>,
+        gate: Gate<'a, T>,
         runs: Runs,
     ) -> Self {
         Self {
@@ -89,7 +89,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let mut cost = T::zero();
         let mut dm = Matrix3::zeros();
         let mut db = Vector3::zeros();
-        for (_, prev, block) in self.runs.pieces(self.samples, BLOCK) {
+        for (_, prev, block) in self.gate.pieces(&self.runs, self.samples, BLOCK) {
             let (mut c_blk, mut dm_blk, mut db_blk) =
                 (T::zero(), Matrix3::zeros(), Vector3::zeros());
             for y in self.gate.rows(block, prev) {
