@@ -12,7 +12,7 @@ use crate::robust::runs::Runs;
 use crate::steps::artificial::Stats;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Projector};
-use crate::steps::rules::{check, Gate, Rules};
+use crate::steps::rules::Gate;
 use crate::{Error, Real, Sample};
 
 /// What the last pass over the samples measures with the final calibration.
@@ -366,11 +366,7 @@ fn final_block<T: Real, S: Sample>(
     let plain = gate.plain_loop();
     let mut last = prev;
     for s in block {
-        let row = if plain {
-            check::<T, S>(s, None, &Rules::PLAIN).ok()
-        } else {
-            gate.pass(s, last)
-        };
+        let row = gate.pass_in(plain, s, last);
         last = Some(s);
         let Some(y) = row else {
             continue;

@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 
 use crate::sample::Sample;
 use crate::steps::dwell::{self, Dwell};
-use crate::steps::rules::{check, count_drops, Drops, Gate, Rules};
+use crate::steps::rules::{count_drops, Drops, Gate, Rules};
 use crate::{Error, Real};
 
 /// Minimum number of finite samples for any fit: the LS ellipsoid has nine
@@ -279,11 +279,7 @@ fn sums_about<T: Real, S: Sample>(
     let mut used = 0;
     let mut last = prev;
     for s in samples {
-        let row = if plain {
-            check::<T, S>(s, None, &Rules::PLAIN).ok()
-        } else {
-            gate.pass(s, last)
-        };
+        let row = gate.pass_in(plain, s, last);
         last = Some(s);
         let Some([y0, y1, y2]) = row else {
             continue;

@@ -330,6 +330,23 @@ impl<'d, T: Real> Gate<'d, T> {
         self.admit(sample, prev).ok()
     }
 
+    /// [`Gate::pass`] in a loop that chose its kind once: with `plain`
+    /// ([`Gate::plain_loop`]) the row is only converted, inline (the same
+    /// rows as the plain gate passes), else it goes through the gate.
+    #[inline(always)]
+    pub(crate) fn pass_in<S: Sample>(
+        &self,
+        plain: bool,
+        sample: &S,
+        prev: Option<&S>,
+    ) -> Option<[T; 3]> {
+        if plain {
+            check::<T, S>(sample, None, &Rules::PLAIN).ok()
+        } else {
+            self.pass(sample, prev)
+        }
+    }
+
     /// The components of a row the gate passes, or the rule that drops
     /// it (`None`: outside the ball). Out of line, the one copy of the
     /// rules ([`Gate::pass`], and [`count_drops`] with clip levels or on
