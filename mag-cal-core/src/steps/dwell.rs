@@ -47,7 +47,7 @@ use crate::tuning::{
 use crate::Real;
 
 /// At most this many still periods are set aside: the first.
-pub const DWELL_SPANS: usize = 4;
+pub const DWELL_SPANS: usize = 3;
 
 /// The still periods set aside: a ball (sensor units) about each, and the
 /// rows kept by the drop rules that lie in one.
@@ -59,7 +59,11 @@ pub const DWELL_SPANS: usize = 4;
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Dwell<T: Real> {
-    balls: [Option<Ball<T>>; DWELL_SPANS],
+    /// The first `len` are the still periods'. Not options: the tag took
+    /// 4 bytes a ball, and a `Dwell` is in the report, whose copies are
+    /// on the robust path's deepest stack.
+    balls: [Ball<T>; DWELL_SPANS],
+    len: u8,
     rows: usize,
 }
 
@@ -72,16 +76,23 @@ impl<T: Real> Default for Dwell<T> {
 impl<T: Real> Dwell<T> {
     /// No row set aside.
     pub const NONE: Self = Self {
-        balls: [None; DWELL_SPANS],
+        balls: [Ball {
+            centre: [T::MAX; 3],
+            radius_sq: T::MAX,
+        }; DWELL_SPANS],
+        len: 0,
         rows: 0,
     };
+
+    fn used(&self) -> &[Ball<T>] {
+        self.balls.get(..usize::from(self.len)).unwrap_or(&[])
+    }
 
     /// The still periods: the centre and the radius of each ball, sensor
     /// units.
     pub fn balls(&self) -> impl Iterator<Item = ([T; 3], T)> + '_ {
-        self.balls
+        self.used()
             .iter()
-            .flatten()
             .map(|b| (b.centre, b.radius_sq.square_root()))
     }
 
@@ -92,14 +103,27 @@ impl<T: Real> Dwell<T> {
 
     /// Whether no still period is set aside.
     pub fn is_empty(&self) -> bool {
-        // Filled in order ([`Tracker::finish`]).
-        matches!(self.balls, [None, ..])
+        self.len == 0
     }
 
     /// Whether the row `y` (sensor units) lies in a still period's ball.
     #[inline(always)]
     pub fn holds(&self, y: [T; 3]) -> bool {
-        self.balls.iter().flatten().any(|b| b.contains(y))
+        self.used().iter().any(|b| b.contains(y))
+    }
+
+    /// Adds a ball, when a slot is free.
+    fn push(&mut self, centre: [T; 3], radius_sq: T) {
+        if let Some(slot) = self.balls.get_mut(usize::from(self.len)) {
+            // Component by component: the tracker's centre, written
+            // whole into its own `found`, linked `memmove` (1.5 kB).
+            let [c0, c1, c2] = centre;
+            slot.centre[0] = c0;
+            slot.centre[1] = c1;
+            slot.centre[2] = c2;
+            slot.radius_sq = radius_sq;
+            self.len += 1;
+        }
     }
 
     /// Counts `rows` set aside (the scan's count).
@@ -211,12 +235,7 @@ impl<T: Real> Tracker<T> {
         }
         let radius =
             self.noise_sum / T::from_count(self.kept) * T::lit(DWELL_RADIUS / DWELL_NOISE / 3.0);
-        if let Some(slot) = self.found.balls.iter_mut().find(|b| b.is_none()) {
-            *slot = Some(Ball {
-                centre: self.mean,
-                radius_sq: radius * radius,
-            });
-        }
+        self.found.push(self.mean, radius * radius);
     }
 
     /// The still periods, given the spread of the rows (`scale`, the RMS
@@ -227,12 +246,9 @@ impl<T: Real> Tracker<T> {
         self.close();
         let limit = scale * T::lit(DWELL_SCALE);
         let mut dwell = Dwell::NONE;
-        let mut slots = dwell.balls.iter_mut();
-        for ball in self.found.balls.iter().flatten() {
+        for ball in self.found.used() {
             if ball.radius_sq < limit * limit {
-                if let Some(slot) = slots.next() {
-                    *slot = Some(*ball);
-                }
+                dwell.push(ball.centre, ball.radius_sq);
             }
         }
         dwell

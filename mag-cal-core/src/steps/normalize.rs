@@ -106,7 +106,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
             rules
         },
         screen: None,
-        dwell: &Dwell::NONE,
+        dwell: T::NO_DWELL,
     };
     // The first kept sample is the origin; the loop runs over the rest.
     let mut prev = None;

@@ -261,7 +261,7 @@ impl<T: Real> Gate<'static, T> {
     pub(crate) const PLAIN: Self = Self {
         rules: Rules::PLAIN,
         screen: None,
-        dwell: &Dwell::NONE,
+        dwell: T::NO_DWELL,
     };
 }
 
@@ -272,6 +272,15 @@ impl<'d, T: Real> Gate<'d, T> {
             rules,
             screen: None,
             dwell,
+        }
+    }
+
+    /// The gate of `rules` alone.
+    pub(crate) const fn only(rules: Rules<T>) -> Self {
+        Self {
+            rules,
+            screen: None,
+            dwell: T::NO_DWELL,
         }
     }
 
@@ -624,7 +633,7 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
     // Through the gate's out-of-line check, no ball: no second copy of
     // the rules for this loop (it runs with clip levels or on
     // floating-point rows).
-    let gate = Gate::of(*rules, &Dwell::NONE);
+    let gate = Gate::only(*rules);
     for s in samples {
         if let Err(Some(rule)) = gate.admit(s, prev) {
             drops.count(rule);
