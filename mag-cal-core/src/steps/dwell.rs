@@ -169,7 +169,16 @@ impl<T: Real> Tracker<T> {
             kept: 0,
             noise_sum: T::zero(),
             long: long.max(DWELL_MIN_RUN),
-            found: Dwell::NONE,
+            // Zeros, as the rest (one `memclr`; `Dwell::NONE`'s constants
+            // were a store each).
+            found: Dwell {
+                balls: [Ball {
+                    centre: zero,
+                    radius_sq: T::zero(),
+                }; DWELL_SPANS],
+                len: 0,
+                rows: 0,
+            },
         }
     }
 
@@ -242,16 +251,20 @@ impl<T: Real> Tracker<T> {
     /// distance from their mean, sensor units): the balls of the runs
     /// found whose radius is below [`DWELL_SCALE`]` scale` (the rows set
     /// aside are counted by the caller).
-    pub(crate) fn finish(mut self, scale: T) -> Dwell<T> {
+    pub(crate) fn finish(&mut self, scale: T) -> Dwell<T> {
         self.close();
         let limit = scale * T::lit(DWELL_SCALE);
-        let mut dwell = Dwell::NONE;
-        for ball in self.found.used() {
-            if ball.radius_sq < limit * limit {
-                dwell.push(ball.centre, ball.radius_sq);
+        // In place, the balls kept moving down (each read before written).
+        let found = usize::from(self.found.len);
+        self.found.len = 0;
+        for k in 0..found {
+            if let Some(&Ball { centre, radius_sq }) = self.found.balls.get(k) {
+                if radius_sq < limit * limit {
+                    self.found.push(centre, radius_sq);
+                }
             }
         }
-        dwell
+        self.found
     }
 }
 

@@ -133,11 +133,11 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
     if let Some(o) = origin {
         // Still periods hold at least a tenth of the rows.
         let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
-        sums = sums_about(rest, before_rest, o, &gate, gate.plain_loop(), &mut runs);
+        sums = sums_about(rest, before_rest, o, &gate, gate.plain_loop(), Some(&mut runs));
         sums.used += 1;
         // The still periods: their rows leave the sums.
         if still {
-            dwell = set_aside(samples, &gate, o, &mut sums, runs);
+            dwell = set_aside(samples, &gate, o, &mut sums, &mut runs);
         }
     }
     let Sums { used, sum, sum_sq } = sums;
@@ -226,7 +226,7 @@ fn set_aside<T: Real, S: Sample>(
     gate: &Gate<T>,
     o: [T; 3],
     sums: &mut Sums<T>,
-    runs: dwell::Tracker<T>,
+    runs: &mut dwell::Tracker<T>,
 ) -> Dwell<T> {
     // The spread of every row kept: the RMS distance from their mean.
     let n = T::from_count(sums.used);
@@ -244,7 +244,7 @@ fn set_aside<T: Real, S: Sample>(
             dwell: &dwell,
             ..*gate
         };
-        *sums = sums_about(samples, None, o, &gate, false, &mut dwell::Tracker::new(usize::MAX));
+        *sums = sums_about(samples, None, o, &gate, false, None);
         dwell.set_rows(used.saturating_sub(sums.used));
     }
     dwell
@@ -273,7 +273,7 @@ fn sums_about<T: Real, S: Sample>(
     o: [T; 3],
     gate: &Gate<T>,
     plain: bool,
-    runs: &mut dwell::Tracker<T>,
+    mut runs: Option<&mut dwell::Tracker<T>>,
 ) -> Sums<T> {
     let [o0, o1, o2] = o;
     let (mut s0, mut s1, mut s2, mut sq) = (T::zero(), T::zero(), T::zero(), T::zero());
@@ -285,7 +285,9 @@ fn sums_about<T: Real, S: Sample>(
         let Some(y) = row else {
             continue;
         };
-        runs.push(y);
+        if let Some(runs) = runs.as_deref_mut() {
+            runs.push(y);
+        }
         let [y0, y1, y2] = y;
         let (d0, d1, d2) = (y0 - o0, y1 - o1, y2 - o2);
         s0 += d0;
