@@ -133,7 +133,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
     if let Some(o) = origin {
         // Still periods hold at least a tenth of the rows.
         let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
-        sums = sums_about(rest, before_rest, o, &gate, gate.plain_loop(), Some(&mut runs));
+        sums = sums_about(rest, before_rest, o, &gate, Some(&mut runs));
         sums.used += 1;
         // The still periods: their rows leave the sums.
         if still {
@@ -244,7 +244,7 @@ fn set_aside<T: Real, S: Sample>(
             dwell: &dwell,
             ..*gate
         };
-        *sums = sums_about(samples, None, o, &gate, false, None);
+        *sums = sums_about(samples, None, o, &gate, None);
         dwell.set_rows(used.saturating_sub(sums.used));
     }
     dwell
@@ -258,21 +258,19 @@ struct Sums<T> {
 }
 
 /// [`Sums`] of the rows `gate` keeps about the origin `o` (`prev`: the
-/// row before `samples`), and their time runs ([`dwell::Tracker`]: the
-/// still periods' pass in the same loop): the loop of [`scan`], on scalars and on its own
-/// (not inlined), so that nothing of the caller competes for its
-/// registers. With `plain` (a plain gate, with outlier handling) each row
-/// is converted inline, else through [`Gate::pass`]: one loop for both.
-/// A copy for each (generic over a filter) took 140 bytes of flash more
-/// with `robust` (LS9 + ADC2, `bash bench.sh flash`) for 8 320
-/// instructions less on clean data (n = 1000, `bash bench.sh bench`).
+/// row before `samples`), and their time runs when `runs` is given
+/// ([`dwell::Tracker`]: the still periods' pass in the same loop): the
+/// loop of [`scan`], on scalars and on its own (not inlined), so that
+/// nothing of the caller competes for its registers. Every row goes
+/// through [`Gate::pass`], a plain gate's too: the inline conversion of
+/// a plain gate's rows took 64 bytes of flash more (LS9 + ADC2, branch
+/// `core-dwell`) for about 39 instructions a row less.
 #[inline(never)]
 fn sums_about<T: Real, S: Sample>(
     samples: &[S],
     prev: Option<&S>,
     o: [T; 3],
     gate: &Gate<T>,
-    plain: bool,
     mut runs: Option<&mut dwell::Tracker<T>>,
 ) -> Sums<T> {
     let [o0, o1, o2] = o;
@@ -280,7 +278,7 @@ fn sums_about<T: Real, S: Sample>(
     let mut used = 0;
     let mut last = prev;
     for s in samples {
-        let row = gate.pass_in(plain, s, last);
+        let row = gate.pass(s, last);
         last = Some(s);
         let Some(y) = row else {
             continue;
