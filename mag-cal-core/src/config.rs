@@ -52,13 +52,14 @@ pub struct Config {
     /// feature, or refusing the default configuration, would surprise more.
     pub robust: bool,
     /// Still periods (default `true`): the rows of a device lying still,
-    /// beyond the first few of each still period, are set aside before any
-    /// fit ([`SampleClass::Dwell`](crate::SampleClass::Dwell), counted in
+    /// for at least a tenth of the recording, are set aside before any fit
+    /// (a ball about where it lay: [`Dwell`](crate::Dwell),
+    /// [`SampleClass::Dwell`](crate::SampleClass::Dwell), counted in
     /// [`Report::dwell`](crate::Report::dwell)), so that a log that starts
     /// and ends lying still calibrates like its motion alone; a device that
     /// hardly moved is refused as
     /// [`Error::HardlyMoved`](crate::Error::HardlyMoved). `false` fits every
-    /// row the rules keep, as before the rule existed. In both builds.
+    /// row the rules keep. In both builds.
     pub still: bool,
     /// The judging limits (default [`Thresholds::DEFAULT`](crate::Thresholds::DEFAULT), the measured
     /// constants of [`quality`](crate::quality)).

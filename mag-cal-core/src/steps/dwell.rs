@@ -41,9 +41,7 @@
 //! told from rows out of time order, which are one run too.
 
 use crate::steps::rules::Ball;
-use crate::tuning::{
-    DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE,
-};
+use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE};
 use crate::Real;
 
 /// At most this many still periods are set aside: the first.
@@ -181,7 +179,6 @@ impl<T: Real> Tracker<T> {
             },
         }
     }
-
 
     /// The next row the rules keep.
     #[inline(always)]
@@ -356,7 +353,8 @@ mod tests {
             assert!(off < 1.0 && (2.0..4.5).contains(&r), "{c:?} {r} {end:?}");
         }
         // Every still row in a ball, and few of the motion's.
-        let held = |range: core::ops::Range<usize>| rows[range].iter().filter(|y| d.holds(**y)).count();
+        let held =
+            |range: core::ops::Range<usize>| rows[range].iter().filter(|y| d.holds(**y)).count();
         assert!(held(0..1200) > 1195 && held(1800..3000) > 1195);
         assert!(held(1200..1800) < 12, "{}", held(1200..1800));
     }

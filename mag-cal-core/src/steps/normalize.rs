@@ -9,8 +9,8 @@ use nalgebra::Vector3;
 
 use crate::sample::Sample;
 use crate::steps::dwell::{self, Dwell};
-use crate::tuning::DWELL_SHARE;
 use crate::steps::rules::{count_drops, Drops, Gate, Rules};
+use crate::tuning::DWELL_SHARE;
 use crate::{Error, Real};
 
 /// Minimum number of finite samples for any fit: the LS ellipsoid has nine
@@ -140,8 +140,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
             // mean (the guard of `Tracker::finish`).
             let n = T::from_count(sums.used);
             let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
-            let var =
-                sums.sum_sq / n - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+            let var = sums.sum_sq / n - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
             dwell = runs.finish(if var > zero { var.square_root() } else { zero });
         }
     }
