@@ -44,6 +44,10 @@ use crate::steps::rules::Ball;
 use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE};
 use crate::Real;
 
+/// The noise's average starts at the smallest of this many second
+/// differences above zero (a spike spoils three).
+const DWELL_SEED: u8 = 4;
+
 /// At most this many still periods are set aside: the first.
 pub const DWELL_SPANS: usize = 3;
 
@@ -197,6 +201,17 @@ impl<T: Real> Tracker<T> {
             // of spikes raised the noise without bound, and one run of
             // motion was set aside as still). The first one above zero
             // starts the average.
+            if self.seen < 2 + DWELL_SEED {
+                // The average starts at the smallest of the first
+                // `DWELL_SEED` above zero: a spike among the first rows
+                // (its three second differences) started it thousands of
+                // times too large, and the first run of motion took a
+                // ball a quarter of the field wide.
+                self.seen += 1;
+                if !(self.noise > T::zero()) || d < self.noise {
+                    self.noise = d;
+                }
+            }
             if !(self.noise > T::zero()) {
                 self.noise = d;
             } else if d < self.noise * T::lit(DWELL_CLIP) {
