@@ -23,8 +23,10 @@
 //!   its end, of [`DWELL_RADIUS`] times its rows' mean sigma. At most
 //!   [`DWELL_SPANS`], the first.
 //!
-//! After the scan's sums ([`Tracker::finish`]), a ball whose radius is
-//! below [`DWELL_SCALE`] times the rows' spread is a still period. The
+//! After the scan's sums ([`Tracker::finish`], [`Dwell::keep_within`]), a ball whose radius is
+//! below [`DWELL_SCALE`](crate::tuning::DWELL_SCALE) times the rows' spread (or the spread of the rows
+//! outside the balls, when larger: a long still period on one side
+//! shrinks the spread of all rows) is a still period. The
 //! spread guards rows that are not in time order (a shuffled or
 //! interleaved recording): their second differences are as large as their
 //! spread, and every row would lie in one run.
@@ -41,7 +43,7 @@
 //! told from rows out of time order, which are one run too.
 
 use crate::steps::rules::Ball;
-use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE};
+use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS};
 use crate::Real;
 
 /// The noise's average starts at the smallest of this many second
@@ -259,24 +261,27 @@ impl<T: Real> Tracker<T> {
         self.found.push(self.mean, radius * radius);
     }
 
-    /// The still periods, given the spread of the rows (`scale`, the RMS
-    /// distance from their mean, sensor units): the balls of the runs
-    /// found whose radius is below [`DWELL_SCALE`]` scale` (the rows set
-    /// aside are counted by the caller).
-    pub(crate) fn finish(&mut self, scale: T) -> Dwell<T> {
+    /// The balls of the runs long enough, the open one closed.
+    pub(crate) fn finish(&mut self) -> Dwell<T> {
         self.close();
-        let limit = scale * T::lit(DWELL_SCALE);
-        // In place, the balls kept moving down (each read before written).
-        let found = usize::from(self.found.len);
-        self.found.len = 0;
+        self.found
+    }
+}
+
+impl<T: Real> Dwell<T> {
+    /// Keeps the balls whose squared radius is below `limit_sq` (in
+    /// place: each read before written), and says whether any was left out.
+    pub(crate) fn keep_within(&mut self, limit_sq: T) -> bool {
+        let found = usize::from(self.len);
+        self.len = 0;
         for k in 0..found {
-            if let Some(&Ball { centre, radius_sq }) = self.found.balls.get(k) {
-                if radius_sq < limit * limit {
-                    self.found.push(centre, radius_sq);
+            if let Some(&Ball { centre, radius_sq }) = self.balls.get(k) {
+                if radius_sq < limit_sq {
+                    self.push(centre, radius_sq);
                 }
             }
         }
-        self.found
+        usize::from(self.len) < found
     }
 }
 
@@ -351,7 +356,11 @@ mod tests {
             .map(|r| (0..3).map(|a| (r[a] - mean[a]).powi(2)).sum::<f64>())
             .sum::<f64>()
             / n;
-        runs.finish(var.sqrt())
+        // The guard on all rows' spread (the scan also tries the spread
+        // of the rows outside the balls).
+        let mut d = runs.finish();
+        d.keep_within(var * crate::tuning::DWELL_SCALE * crate::tuning::DWELL_SCALE);
+        d
     }
 
     #[test]
