@@ -10,8 +10,10 @@
 //! known heading fixes ([`PlanarCalibration::aligned`]).
 //!
 //! The steps, as in the three-dimensional fit:
-//! 1. the glitch rules and the screening ball (median centre, median
-//!    distance) of the three-dimensional fit;
+//! 1. the glitch rules, the still periods set aside
+//!    ([`crate::Dwell`], with [`PlanarConfig::still`]) and the
+//!    screening ball (median centre, median distance) of the
+//!    three-dimensional fit;
 //! 2. the plane: the normal is the eigenvector of the smallest eigenvalue of
 //!    the screened samples' covariance, its sign set to point along the
 //!    `up` axis the caller names; `flatness` is that eigenvalue over the
@@ -66,9 +68,9 @@ use crate::numerics::linalg::{cholesky, cholesky_solve, dot, larger, sym_eigen, 
 use crate::robust::screen::{screen, Unscreened};
 use crate::sample::Sample;
 use crate::steps::methods::robust_sigma;
-use crate::steps::normalize::{scan, MIN_SAMPLES};
+use crate::steps::normalize::{scan_still, MIN_SAMPLES};
 use crate::steps::rules::{pieces, Drops, Gate};
-use crate::{Error as FitError, Figure, Real};
+use crate::{Dwell, Error as FitError, Figure, Real};
 
 /// Why a planar fit was refused: the refusals of its own, or one it shares
 /// with the three-dimensional fit.
@@ -83,7 +85,9 @@ pub enum Error {
     /// fit: [`crate::Error::TooFewSamples`],
     /// [`crate::Error::AllSamplesEqual`], [`crate::Error::OutOfRange`],
     /// [`crate::Error::SingularSystem`], [`crate::Error::NoSphere`] (more
-    /// than half the rows on one point), [`crate::Error::TooManyOutliers`].
+    /// than half the rows on one point), [`crate::Error::TooManyOutliers`],
+    /// [`crate::Error::HardlyMoved`] (too few rows beside the still
+    /// periods).
     Fit(FitError),
     /// The samples do not lie near one plane; the device turned about more
     /// than one axis.
@@ -177,6 +181,13 @@ pub struct PlanarConfig {
     pub up: [f64; 3],
     /// The judging limits.
     pub thresholds: PlanarThresholds,
+    /// Still periods (default `true`), as [`crate::Config::still`]: the
+    /// rows of a device lying still are set aside before any pass (counted in
+    /// [`PlanarReport::dwell`], not outliers), so that a log that starts
+    /// and ends lying still calibrates like its turns alone; too few rows
+    /// left is refused as [`crate::Error::HardlyMoved`]. `false` fits
+    /// every row the rules keep, as before the rule existed.
+    pub still: bool,
 }
 
 impl PlanarConfig {
@@ -184,13 +195,14 @@ impl PlanarConfig {
     pub const DEFAULT: Self = Self {
         up: [0.0, 0.0, -1.0],
         thresholds: PlanarThresholds::DEFAULT,
+        still: true,
     };
 
     /// The defaults with another `up` axis.
     pub const fn with_up(up: [f64; 3]) -> Self {
         Self {
             up,
-            thresholds: PlanarThresholds::DEFAULT,
+            ..Self::DEFAULT
         }
     }
 }
@@ -352,6 +364,14 @@ pub struct PlanarReport<T: Real> {
     pub samples_used: usize,
     /// Rows dropped by each rule.
     pub drops: Drops,
+    /// Rows kept by the rules but set aside as still periods
+    /// ([`crate::Dwell`]), as [`crate::Report::dwell`]: not outliers, and
+    /// not counted by the outlier share. `samples_used + drops.total() + dwell +
+    /// screened + rejected` is the input's length.
+    pub dwell: usize,
+    /// The still periods: the balls of those rows ([`Dwell::holds`] tells
+    /// a row's).
+    pub still_periods: Dwell<T>,
     /// Rows kept by the rules but outside the screening ball.
     pub screened: usize,
     /// Rows inside the ball left out by their residual.
@@ -399,7 +419,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
     config.validate()?;
-    let scanned = scan::<T, S>(samples, true)?;
+    let scanned = scan_still::<T, S>(samples, true, config.still)?;
     let screening = match screen(samples, &scanned) {
         Ok(s) => s,
         Err(Unscreened::AllEqual) => return Err(FitError::AllSamplesEqual.into()),
@@ -438,7 +458,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let valid = screening.valid;
     let report = figures.report(
         &w2,
-        screening.drops,
+        (screening.drops, scanned.dwell),
         valid,
         (flatness, axis_tilt_deg),
         passes,
@@ -606,12 +626,13 @@ impl<T: Real> FigureSums<T> {
     }
 
     /// The report of the rows added under the ellipse `W2` = `w2`: `drops`
-    /// and `valid` are the rules', `plane` the flatness and the axis's
-    /// tilt from `up` (step 2), `passes` every pass made.
+    /// and `valid` are the rules', `dwell` the still periods set aside,
+    /// `plane` the flatness and the axis's tilt from `up` (step 2),
+    /// `passes` every pass made.
     fn report(
         &self,
         w2: &[[T; 2]; 2],
-        drops: Drops,
+        (drops, dwell): (Drops, Dwell<T>),
         valid: usize,
         (flatness, axis_tilt_deg): (T, T),
         passes: u32,
@@ -634,6 +655,8 @@ impl<T: Real> FigureSums<T> {
         PlanarReport {
             samples_used: used,
             drops,
+            dwell: dwell.rows(),
+            still_periods: dwell,
             screened: valid.saturating_sub(self.seen),
             rejected: self.seen - used,
             flatness,
@@ -658,7 +681,8 @@ struct Rows<'a, T: Real, S: Sample> {
 }
 
 impl<T: Real, S: Sample> Rows<'_, T, S> {
-    /// Calls `f` on every row the gate passes.
+    /// Calls `f` on every row the gate passes (outside the still periods
+    /// too).
     #[inline(always)]
     fn each(&self, mut f: impl FnMut([T; 3])) {
         let (c, k) = (self.centre, self.inv_scale);

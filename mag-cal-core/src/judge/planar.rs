@@ -32,7 +32,8 @@ pub struct PlanarThresholds {
     /// Fewer sectors than this: [`Error::ShortArc`].
     pub min_sectors: u8,
     /// Share of the rules' rows screened out or rejected above this:
-    /// [`crate::Error::TooManyOutliers`].
+    /// [`crate::Error::TooManyOutliers`] (the still periods set aside are
+    /// no outliers, and not among those rows).
     pub refuse_outlier_share: f32,
 }
 
@@ -77,7 +78,7 @@ impl Default for PlanarThresholds {
 }
 
 /// Turns the figures into acceptance or a refusal: `valid` is the rows the
-/// rules kept.
+/// rules kept beside the still periods set aside.
 ///
 /// # Errors
 /// In that order: too few samples ([`crate::Error::TooFewSamples`]),
