@@ -1,0 +1,580 @@
+//! Still periods (issue 36) in the planar (heading-only) fit: a log that
+//! lies still before, after or between its turns calibrates like the
+//! turns alone, and the still rows are no outliers.
+//!
+//! The issue's case, a real ground-robot log ("still, one slow turn,
+//! still": 440 rows, more than half at the two still positions, radial RMS
+//! 1.9 %, no row beyond 5 %, refused as "too many outliers: 112 of 440"),
+//! is not available: it is simulated ([`robot_log`]); the shared planar
+//! recording `planar_243.txt` gets still periods added.
+//!
+//! `cargo test --release -p host-tests --test still_planar -- --nocapture`
+//! prints the figures behind the assertions.
+
+use host_tests::planar::{attitude, earth, level_turns};
+use host_tests::real::read_xyz;
+use host_tests::sim::Rng;
+use mag_cal_core::planar::{calibrate_planar, Error, PlanarConfig, PlanarFit};
+use mag_cal_core::{Error as FitError, Real};
+use nalgebra::{Matrix3, SMatrix, Vector3};
+
+/// The heading error that 1 % of the field makes at most: `asin(0.01)`.
+const HEADING_OF_ONE_PERCENT: f64 = 0.573;
+
+/// The robot's sensor: soft iron (field 400 counts) and hard iron.
+fn robot_sensor() -> (Matrix3<f64>, Vector3<f64>) {
+    let s = Matrix3::new(1.12, 0.05, -0.02, 0.05, 0.93, 0.03, -0.02, 0.03, 1.01);
+    (s * 400.0, Vector3::new(85.0, -140.0, 30.0))
+}
+
+/// The robot's field in the plane of its turns (the horizontal field
+/// through the soft iron), counts: the RMS distance of the noiseless turn
+/// from its centre.
+fn robot_plane_field() -> f64 {
+    let (t, _) = robot_sensor();
+    let body = |psi: f64| t * (attitude(psi, 0.0, 0.0) * earth());
+    let n = 720;
+    let pts: Vec<Vector3<f64>> = (0..n)
+        .map(|i| body(i as f64 / n as f64 * std::f64::consts::TAU))
+        .collect();
+    let mean = pts.iter().sum::<Vector3<f64>>() / n as f64;
+    (pts.iter().map(|p| (p - mean).norm_squared()).sum::<f64>() / n as f64).sqrt()
+}
+
+/// A reading of the level robot at heading `psi` (radians), normal noise
+/// of `sigma` counts per axis, its length clipped at 2.2 sigma (the log has
+/// no row beyond 5 % of the field).
+fn robot_reading(psi: f64, sigma: f64, rng: &mut Rng) -> [f64; 3] {
+    let (t, b) = robot_sensor();
+    let h = attitude(psi, 0.0, 0.0) * earth();
+    let n = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+    let n = n * (2.2 / n.norm()).min(1.0) * sigma;
+    let y = t * h + b + n;
+    [y.x, y.y, y.z]
+}
+
+/// "Still, one slow turn, still": `still` rows at the start heading with
+/// noise `still_noise` (share of the field in the plane, per axis), `turn`
+/// rows of `turns` slow turns with noise `turn_noise`, `still` rows at the
+/// end heading. The rows, and the range of the turn's.
+fn robot_log(
+    still: usize,
+    turn: usize,
+    (still_noise, turn_noise): (f64, f64),
+    turns: f64,
+    seed: u64,
+) -> (Vec<[f64; 3]>, std::ops::Range<usize>) {
+    let mut rng = Rng::for_case(seed, 36);
+    let field = robot_plane_field();
+    let (start, end) = (0.3, 0.3 + turns * std::f64::consts::TAU);
+    let mut rows: Vec<[f64; 3]> = (0..still)
+        .map(|_| robot_reading(start, still_noise * field, &mut rng))
+        .collect();
+    for i in 0..turn {
+        let psi = start + (end - start) * (i as f64 + 0.5) / turn as f64;
+        rows.push(robot_reading(psi, turn_noise * field, &mut rng));
+    }
+    rows.extend((0..still).map(|_| robot_reading(end, still_noise * field, &mut rng)));
+    (rows, still..still + turn)
+}
+
+/// Where still rows are added to a recording.
+#[derive(Clone, Copy, Debug)]
+enum Place {
+    /// Before its first row (that row, with noise).
+    Before,
+    /// After its last row.
+    After,
+    /// Before and after, `k` rows each.
+    Ends,
+    /// In the middle (the middle row).
+    Between,
+}
+
+/// The recording `rows` with `k` still rows at `place` (each end's for
+/// [`Place::Ends`]): the row there repeated with normal noise of `noise`
+/// times `field` per axis. The rows, and where the recording's rows are
+/// (in order).
+fn with_still(
+    rows: &[[f64; 3]],
+    place: Place,
+    k: usize,
+    noise: f64,
+    field: f64,
+    seed: u64,
+) -> (Vec<[f64; 3]>, Vec<usize>) {
+    let mut rng = Rng::for_case(seed, 3600);
+    let mut still = |p: [f64; 3], k: usize| -> Vec<[f64; 3]> {
+        (0..k)
+            .map(|_| p.map(|v| v + noise * field * rng.normal()))
+            .collect()
+    };
+    let n = rows.len();
+    let (mut out, mut motion) = (Vec::new(), Vec::new());
+    let mut push_motion = |out: &mut Vec<[f64; 3]>, part: &[[f64; 3]]| {
+        for r in part {
+            motion.push(out.len());
+            out.push(*r);
+        }
+    };
+    match place {
+        Place::Before => {
+            out = still(rows[0], k);
+            push_motion(&mut out, rows);
+        }
+        Place::After => {
+            push_motion(&mut out, rows);
+            out.extend(still(rows[n - 1], k));
+        }
+        Place::Ends => {
+            out = still(rows[0], k);
+            push_motion(&mut out, rows);
+            out.extend(still(rows[n - 1], k));
+        }
+        Place::Between => {
+            push_motion(&mut out, &rows[..n / 2]);
+            out.extend(still(rows[n / 2], k));
+            push_motion(&mut out, &rows[n / 2..]);
+        }
+    }
+    (out, motion)
+}
+
+/// How far a fit lies from the fit without the still rows, in units of the
+/// latter's field in the plane: the centre within the plane, the field
+/// strength, `K^T K` (Frobenius, relative to its norm), and the largest
+/// heading difference over the recording's rows (degrees, their mean
+/// difference removed: one alignment).
+#[derive(Clone, Copy, Debug, Default)]
+struct Shift {
+    centre: f64,
+    field: f64,
+    m: f64,
+    heading: f64,
+}
+
+impl Shift {
+    fn of<T: Real>(base: &PlanarFit<T>, fit: &PlanarFit<T>, rows: &[[f64; 3]]) -> Self {
+        let f = |v: T| v.to_f64();
+        let (a, b) = (&base.calibration, &fit.calibration);
+        let rho = f(a.plane_strength());
+        let axis = Vector3::from(a.axis().map(f));
+        let dc = Vector3::from(b.centre().map(f)) - Vector3::from(a.centre().map(f));
+        let in_plane = dc - axis * dc.dot(&axis);
+        let k = |c: &mag_cal_core::planar::PlanarCalibration<T>| {
+            let m = c.matrix();
+            SMatrix::<f64, 2, 3>::from_fn(|i, j| f(m[i][j]))
+        };
+        let (ka, kb) = (k(a), k(b));
+        let (ma, mb) = (ka.transpose() * ka, kb.transpose() * kb);
+        let diffs: Vec<f64> = rows
+            .iter()
+            .map(|r| {
+                let s = r.map(|v| T::lit(v));
+                f(b.turn_angle_deg(s)) - f(a.turn_angle_deg(s))
+            })
+            .collect();
+        let (sin, cos) = diffs.iter().fold((0.0, 0.0), |(s, c), d| {
+            (s + d.to_radians().sin(), c + d.to_radians().cos())
+        });
+        let mean = f64::atan2(sin, cos).to_degrees();
+        let heading = diffs
+            .iter()
+            .map(|d| ((d - mean + 540.0).rem_euclid(360.0) - 180.0).abs())
+            .fold(0.0, f64::max);
+        Self {
+            centre: in_plane.norm() / rho,
+            field: (f(b.plane_strength()) - rho).abs() / rho,
+            m: (mb - ma).norm() / ma.norm(),
+            heading,
+        }
+    }
+
+    fn max(self, o: Self) -> Self {
+        Self {
+            centre: self.centre.max(o.centre),
+            field: self.field.max(o.field),
+            m: self.m.max(o.m),
+            heading: self.heading.max(o.heading),
+        }
+    }
+
+    /// Within 1 % of the field (and the heading error that makes).
+    fn within_one_percent(&self) -> bool {
+        self.centre < 0.01
+            && self.field < 0.01
+            && self.m < 0.01
+            && self.heading < HEADING_OF_ONE_PERCENT
+    }
+}
+
+impl std::fmt::Display for Shift {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "centre {:.3} %, field {:.3} %, K'K {:.3} %, heading {:.3} deg",
+            100.0 * self.centre,
+            100.0 * self.field,
+            100.0 * self.m,
+            self.heading
+        )
+    }
+}
+
+/// The refusal's cause: its variant (the shared refusals by theirs).
+fn cause(e: &Error) -> String {
+    let text = match e {
+        Error::Fit(inner) => format!("{inner:?}"),
+        other => format!("{other:?}"),
+    };
+    text.split([' ', '{', '(']).next().unwrap_or("").to_owned()
+}
+
+/// One recording with still rows against the recording alone (`base`):
+/// the shift and the rows set aside when both are accepted, `None` when
+/// both are refused alike. Panics when an acceptance turns into a refusal,
+/// a refusal into an acceptance, or a refusal changes cause, and when a
+/// row is not counted once (`motion`: the recording's rows, in order).
+fn check<T: Real>(
+    label: &str,
+    base: &Result<PlanarFit<T>, Error>,
+    rows: &[[f64; 3]],
+    motion: &[usize],
+    config: &PlanarConfig,
+) -> Option<(Shift, usize)> {
+    let input: Vec<[T; 3]> = rows.iter().map(|r| r.map(|v| T::lit(v))).collect();
+    let got = calibrate_planar::<T, _>(&input, config);
+    match (base, &got) {
+        (Ok(b), Ok(f)) => {
+            let moving: Vec<[f64; 3]> = motion.iter().map(|&i| rows[i]).collect();
+            let s = Shift::of(b, f, &moving);
+            let r = &f.report;
+            // The rows set aside are the still ones, and those of the
+            // motion that pass through a still period's ball.
+            let motion_aside = motion
+                .iter()
+                .filter(|&&i| r.still_periods.holds(rows[i].map(|v| T::lit(v))))
+                .count();
+            println!(
+                "| {label} | {} | {s} | {} ({motion_aside} moving) | {} | {} |",
+                rows.len(),
+                r.dwell,
+                r.samples_used,
+                r.screened + r.rejected
+            );
+            assert_eq!(
+                r.samples_used + r.drops.total() + r.dwell + r.screened + r.rejected,
+                rows.len(),
+                "{label}: {r:?}"
+            );
+            Some((s, r.dwell))
+        }
+        (Err(a), Err(e)) => {
+            println!("| {label} | {} | refused: {e} | | | |", rows.len());
+            assert_eq!(cause(a), cause(e), "{label}: the cause changed: {a} -> {e}");
+            None
+        }
+        (Ok(_), Err(e)) => panic!("{label}: accepted alone, refused with still rows: {e}"),
+        (Err(a), Ok(_)) => panic!("{label}: refused alone ({a}), accepted with still rows"),
+    }
+}
+
+/// `config` without the still rule.
+fn without_rule(config: &PlanarConfig) -> PlanarConfig {
+    let mut c = *config;
+    c.still = false;
+    c
+}
+
+/// The issue's case: the robot log is accepted, and calibrates like its
+/// turn alone (in `f64` and `f32`). With still rows of 0.15 % noise the
+/// simulation without the rule shows the report's symptom (100-153 of 440
+/// rows outliers, half the seeds refused as too many, the real log 112);
+/// the still noise of the issue's range, 0.2 % to 3 %, is accepted too.
+#[test]
+fn the_robot_log_is_accepted_like_its_turn() {
+    println!(
+        "| robot log | rows | shift from the turn alone | set aside | used | screened + rejected |"
+    );
+    println!("|---|---|---|---|---|---|");
+    let mut refused_without = 0;
+    let mut worst = Shift::default();
+    for still_noise in [0.0015, 0.002, 0.01, 0.03] {
+        for seed in 1..=8u64 {
+            let (rows, turn) = robot_log(120, 200, (still_noise, 0.019), 1.1, seed);
+            assert_eq!(rows.len(), 440);
+            let motion: Vec<usize> = turn.clone().collect();
+            let alone = calibrate_planar::<f64, _>(&rows[turn.clone()], &PlanarConfig::default())
+                .unwrap_or_else(|e| panic!("seed {seed}: the turn alone refused: {e}"));
+            // The turn as the issue describes it: radial RMS about 1.9 %,
+            // no row beyond 5 %.
+            let radial: Vec<f64> = rows[turn.clone()]
+                .iter()
+                .map(|&r| {
+                    let [u, v] = alone.calibration.apply(r);
+                    (u * u + v * v).sqrt() - 1.0
+                })
+                .collect();
+            let rms = (radial.iter().map(|e| e * e).sum::<f64>() / radial.len() as f64).sqrt();
+            let largest = radial.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+            assert!(
+                (0.015..0.025).contains(&rms) && largest < 0.05,
+                "seed {seed}: {rms} {largest}"
+            );
+            let label = format!(
+                "still noise {:.2} %, seed {seed}, radial RMS {:.2} %",
+                100.0 * still_noise,
+                100.0 * rms
+            );
+            if still_noise == 0.0015 {
+                let outliers = match calibrate_planar::<f64, _>(
+                    &rows,
+                    &without_rule(&PlanarConfig::default()),
+                ) {
+                    Err(Error::Fit(FitError::TooManyOutliers {
+                        rejected, valid, ..
+                    })) => {
+                        assert_eq!(valid, 440);
+                        refused_without += 1;
+                        rejected
+                    }
+                    Ok(f) => f.report.screened + f.report.rejected,
+                    Err(e) => panic!("{label} without the rule: {e}"),
+                };
+                println!("{label} without the rule: {outliers} of 440 outliers");
+                assert!(
+                    outliers >= 88,
+                    "{label}: {outliers} outliers without the rule"
+                );
+            }
+            let (s, dwell) = check(&label, &Ok(alone), &rows, &motion, &PlanarConfig::default())
+                .expect("accepted");
+            assert!(s.within_one_percent(), "{label}: {s}");
+            // The still rows (less those the repetition rule drops).
+            assert!(dwell >= 220, "{label}: {dwell} set aside");
+            worst = worst.max(s);
+            let rows32: Vec<[f32; 3]> = rows[turn.clone()]
+                .iter()
+                .map(|r| r.map(|v| v as f32))
+                .collect();
+            let alone32 = calibrate_planar::<f32, _>(&rows32, &PlanarConfig::default());
+            let config = PlanarConfig::default();
+            let (s, _) = check(&format!("{label}, f32"), &alone32, &rows, &motion, &config)
+                .expect("accepted");
+            assert!(s.within_one_percent(), "{label} f32: {s}");
+        }
+    }
+    println!("worst: {worst}");
+    // The simulation reproduces the report: the rule is what accepts it.
+    assert!(
+        refused_without >= 2,
+        "{refused_without} of 8 refused without the rule"
+    );
+}
+
+/// One full turn, both still periods on one heading (more than half the
+/// rows on one point): accepted as the turn alone.
+#[test]
+fn one_full_turn_between_still_periods_on_one_heading() {
+    for seed in 1..=8u64 {
+        let (rows, turn) = robot_log(120, 200, (0.002, 0.019), 1.0, seed);
+        let motion: Vec<usize> = turn.clone().collect();
+        let alone = calibrate_planar::<f64, _>(&rows[turn], &PlanarConfig::default());
+        let without = calibrate_planar::<f64, _>(&rows, &without_rule(&PlanarConfig::default()));
+        println!(
+            "seed {seed} without the rule: {:?}",
+            without.as_ref().map(|f| f.report.rejected)
+        );
+        let (s, _) = check(
+            &format!("one turn, seed {seed}"),
+            &alone,
+            &rows,
+            &motion,
+            &PlanarConfig::default(),
+        )
+        .expect("accepted");
+        assert!(s.within_one_percent(), "seed {seed}: {s}");
+    }
+}
+
+/// Still periods before, after, at both ends or in the middle of the
+/// robot's turn and of the shared planar recording, each 1x to 10x the
+/// motion's rows, noise 0.2 %, 1 % and 3 % of the field in the plane:
+/// within 1 % of the field of the fit without them, no acceptance turned
+/// into a refusal.
+#[test]
+fn still_periods_of_every_size_place_and_noise_leave_the_fit() {
+    let (robot, turn) = robot_log(0, 200, (0.0, 0.019), 1.1, 1);
+    assert_eq!(turn, 0..200);
+    let recordings: Vec<(&str, Vec<[f64; 3]>, PlanarConfig)> = vec![
+        ("robot turn", robot, PlanarConfig::default()),
+        (
+            "planar_243.txt",
+            read_xyz("planar_243.txt"),
+            PlanarConfig::with_up([0.0, 0.0, 1.0]),
+        ),
+    ];
+    println!("| case | rows | shift | set aside | used | screened + rejected |");
+    println!("|---|---|---|---|---|---|");
+    let mut worst = Shift::default();
+    for (name, rows, config) in &recordings {
+        let base = calibrate_planar::<f64, _>(rows, config);
+        let field = base
+            .as_ref()
+            .unwrap_or_else(|e| panic!("{name} alone: {e}"))
+            .calibration
+            .plane_strength();
+        for noise in [0.002, 0.01, 0.03] {
+            for mult in [1, 2, 5, 10] {
+                for place in [Place::Before, Place::After, Place::Ends, Place::Between] {
+                    let k = mult * rows.len();
+                    let (all, motion) = with_still(rows, place, k, noise, field, mult as u64);
+                    let label = format!("{name}, {place:?} {mult}x, noise {:.1} %", 100.0 * noise);
+                    let (s, dwell) = check(&label, &base, &all, &motion, config).expect("accepted");
+                    assert!(s.within_one_percent(), "{label}: {s}");
+                    // The still rows, less those the repetition rule drops
+                    // and those of the first noise estimates.
+                    let periods = if matches!(place, Place::Ends) { 2 } else { 1 };
+                    assert!(
+                        dwell + periods * 30 >= periods * k,
+                        "{label}: {dwell} set aside"
+                    );
+                    worst = worst.max(s);
+                }
+            }
+        }
+    }
+    println!("worst: {worst}");
+}
+
+/// Planar captures without still periods: the rule sets at most 5 % of
+/// their rows aside and moves the result by at most 0.3 % of the field.
+#[test]
+fn captures_without_still_periods_are_left_as_they_are() {
+    let mut captures: Vec<(String, Vec<[f64; 3]>, PlanarConfig)> = vec![(
+        "planar_243.txt".into(),
+        read_xyz("planar_243.txt"),
+        PlanarConfig::with_up([0.0, 0.0, 1.0]),
+    )];
+    for seed in 1..=4 {
+        let (rows, _) = robot_log(0, 200, (0.0, 0.019), 1.1, seed);
+        captures.push((format!("robot turn {seed}"), rows, PlanarConfig::default()));
+    }
+    // The planar tests' level turns (two turns at a varying rate, noise 2 %
+    // of the field in the plane), with roll and pitch wandering by up to
+    // 8 deg (the fit error 0.15-0.2 at 8 deg, some refused).
+    for tilt in [0.0, 3.0, 5.0, 8.0] {
+        for seed in 1..=5 {
+            let (rows, _) = level_turns(tilt, 300, seed);
+            captures.push((
+                format!("level turns, tilt {tilt}, seed {seed}"),
+                rows,
+                PlanarConfig::default(),
+            ));
+        }
+    }
+    for (name, rows, config) in &captures {
+        let with = calibrate_planar::<f64, _>(rows, config);
+        let without = calibrate_planar::<f64, _>(rows, &without_rule(config));
+        let (a, b) = match (&with, &without) {
+            (Ok(a), Ok(b)) => (a, b),
+            (Err(a), Err(b)) => {
+                println!("{name}: refused, {a}");
+                assert_eq!(cause(a), cause(b), "{name}");
+                continue;
+            }
+            _ => panic!("{name}: {with:?} vs {without:?}"),
+        };
+        let s = Shift::of(b, a, rows);
+        println!(
+            "{name}: {} of {} rows set aside, {s}",
+            a.report.dwell,
+            rows.len()
+        );
+        assert!(
+            a.report.dwell * 20 <= rows.len(),
+            "{name}: {}",
+            a.report.dwell
+        );
+        assert!(
+            s.centre <= 0.003 && s.field <= 0.003 && s.m <= 0.003,
+            "{name}: {s}"
+        );
+    }
+}
+
+/// A refusal keeps its cause with still periods added, and a device that
+/// hardly moved between two still periods is refused as such.
+#[test]
+fn refusals_keep_their_cause() {
+    // Half a turn: too short an arc, alone and with still ends.
+    let (half, turn) = robot_log(0, 150, (0.0, 0.01), 0.5, 5);
+    let field = robot_plane_field();
+    let base = calibrate_planar::<f64, _>(&half[turn], &PlanarConfig::default());
+    assert!(matches!(base, Err(Error::ShortArc { .. })), "{base:?}");
+    // A three-dimensional recording: not planar.
+    let sphere = read_xyz("icm20948_mag_300.csv");
+    let base3 = calibrate_planar::<f64, _>(&sphere, &PlanarConfig::default());
+    assert!(matches!(base3, Err(Error::NotPlanar { .. })), "{base3:?}");
+    for noise in [0.002, 0.01, 0.03] {
+        for mult in [1, 10] {
+            for place in [Place::Ends, Place::Between] {
+                let (all, motion) = with_still(&half, place, mult * half.len(), noise, field, 7);
+                let label = format!("half turn, {place:?} {mult}x, noise {noise}");
+                assert!(check(&label, &base, &all, &motion, &PlanarConfig::default()).is_none());
+                let (all, motion) =
+                    with_still(&sphere, place, mult * sphere.len(), noise, 300.0, 7);
+                let label = format!("icm20948, {place:?} {mult}x, noise {noise}");
+                assert!(check(&label, &base3, &all, &motion, &PlanarConfig::default()).is_none());
+            }
+        }
+    }
+    // Two still periods with one row of motion between: hardly moved.
+    let (log, _) = robot_log(300, 1, (0.005, 0.005), 0.5, 6);
+    let got = calibrate_planar::<f64, _>(&log, &PlanarConfig::default());
+    println!("two still periods, one row between: {got:?}");
+    assert!(
+        matches!(
+            got,
+            Err(Error::Fit(FitError::HardlyMoved { required: 10, .. }))
+        ),
+        "{got:?}"
+    );
+    let text = got.map(|_| ()).unwrap_err().to_string();
+    assert!(text.starts_with("the device hardly moved"), "{text}");
+}
+
+/// The core rule, in the batch fit: one still period of 10x the motion at
+/// 3 % noise before, after or in the middle of a 3-D recording leaves the
+/// fit (its guard's spread is that of the rows outside the still period:
+/// the spread of all rows shrank below the period's own radius, and the
+/// batch fit refused `NoSphere` 0.43 after the recording).
+#[test]
+fn one_long_noisy_still_period_leaves_the_batch_fit() {
+    use mag_cal_core::{calibrate, Config};
+    let rows = read_xyz("icm20948_mag_300.csv");
+    let base = calibrate::<f64, _>(&rows, &Config::default()).expect("accepted");
+    let rho = base.calibration.field_strength();
+    let b0 = base.calibration.hard_iron();
+    for place in [Place::Before, Place::After, Place::Between, Place::Ends] {
+        let (all, _) = with_still(&rows, place, 10 * rows.len(), 0.03, rho, 3);
+        let fit = calibrate::<f64, _>(&all, &Config::default())
+            .unwrap_or_else(|e| panic!("{place:?}: {e}"));
+        let b = fit.calibration.hard_iron();
+        let db = (0..3).map(|i| (b[i] - b0[i]).powi(2)).sum::<f64>().sqrt() / rho;
+        let drho = (fit.calibration.field_strength() - rho).abs() / rho;
+        println!(
+            "icm20948 {place:?} 10x at 3 %: {} set aside, b {:.3} %, field {:.3} %",
+            fit.report.dwell,
+            100.0 * db,
+            100.0 * drho
+        );
+        assert!(db < 0.01 && drho < 0.01, "{place:?}: {db} {drho}");
+        let periods = if matches!(place, Place::Ends) { 2 } else { 1 };
+        assert!(
+            fit.report.dwell + 30 * periods >= 3000 * periods,
+            "{place:?}: {}",
+            fit.report.dwell
+        );
+    }
+}
