@@ -100,6 +100,7 @@ fn render<T: Real>(
                 "samples_used": r.samples_used,
                 "samples_dropped": r.drops.total(),
                 "drops": DropCounts(r.drops),
+                "dwell": r.dwell,
                 "screened": r.screened,
                 "rejected": r.rejected,
                 "flatness": f(r.flatness),
@@ -138,7 +139,7 @@ fn render<T: Real>(
                  [{:.6}, {:.6}, {:.6}]\n  \
                  zero          {:.3} deg: {zero}\n  \
                  field         {:.4} in the plane\n  \
-                 samples       {} used of {}: {} dropped{dropped}, {} screened, {} rejected\n  \
+                 samples       {} used of {}: {} dropped{dropped}, {} still, {} screened, {} rejected\n  \
                  fit error     {:.4} of the field in the plane\n  \
                  flatness      {:.4} (thickness {:.4} of the field in the plane)\n  \
                  coverage      {} of 12 sectors of 30 deg\n",
@@ -157,6 +158,7 @@ fn render<T: Real>(
                 r.samples_used,
                 table.samples.len(),
                 r.drops.total(),
+                r.dwell,
                 r.screened,
                 r.rejected,
                 f(r.fit_error),

@@ -2039,6 +2039,78 @@ fn planar_calibrates_turns_about_one_axis_and_apply_gives_headings() {
     assert!(text.stdout.contains("not observable"), "{}", text.stdout);
 }
 
+/// Recorded as people record (issue 36): `planar_243.txt` with its first
+/// and last reading repeated 2x its rows at each end, with noise of 0.4
+/// (uT, about 0.2 % of the field in the plane). The still rows are set
+/// aside and counted, and the calibration is that of the recording alone.
+#[test]
+fn planar_sets_still_ends_aside() {
+    let path = real("planar_243.txt");
+    let args = |file: &str| -> Vec<String> {
+        ["planar", file, "--up", "z", "--format", "json"]
+            .map(String::from)
+            .to_vec()
+    };
+    let run = |file: &str| {
+        let a = args(file);
+        magcal(&a.iter().map(String::as_str).collect::<Vec<_>>(), None).json()
+    };
+    let alone = run(&path);
+    assert_eq!(alone["dwell"], 0, "{alone}");
+    let rows = read_xyz(&path);
+    let (first, last) = (rows[0], rows[rows.len() - 1]);
+    // -0.4, 0, 0 or +0.4 per axis, from a fixed LCG.
+    let mut state = 36u32;
+    let mut still = |r: [f64; 3], n: usize| -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|_| {
+                r.map(|v| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    v + [-0.4, 0.0, 0.0, 0.4][(state >> 30) as usize]
+                })
+            })
+            .collect()
+    };
+    let n = 2 * rows.len();
+    let log: Vec<[f64; 3]> = [still(first, n), rows.clone(), still(last, n)].concat();
+    let text: String = log
+        .iter()
+        .map(|r| format!("{:.1},{:.1},{:.1}\n", r[0], r[1], r[2]))
+        .collect();
+    let file = temp_file("planar_still_ends.csv", &text);
+    let v = run(&file);
+    let dwell = v["dwell"].as_u64().unwrap();
+    // All but a few of each end's rows, beside those the repetition rule
+    // drops.
+    let dropped = v["samples_dropped"].as_u64().unwrap();
+    assert!(dwell + dropped + 40 >= 2 * n as u64, "{v}");
+    let accounted = v["samples_used"].as_u64().unwrap()
+        + dropped
+        + dwell
+        + v["screened"].as_u64().unwrap()
+        + v["rejected"].as_u64().unwrap();
+    assert_eq!(accounted, log.len() as u64);
+    let rho = alone["plane_strength"].as_f64().unwrap();
+    let (c0, c) = (vec3(&alone["centre"]), vec3(&v["centre"]));
+    // Within the plane (z is the turn axis here).
+    let dc = ((c[0] - c0[0]).powi(2) + (c[1] - c0[1]).powi(2)).sqrt();
+    println!(
+        "{} rows: {dwell} still, {dropped} dropped; centre moved by {:.3} % of the field in the plane, field by {:.3} %",
+        log.len(),
+        100.0 * dc / rho,
+        100.0 * (v["plane_strength"].as_f64().unwrap() - rho).abs() / rho
+    );
+    assert!(dc < 0.01 * rho, "centre moved by {dc} of {rho}");
+    assert!((v["plane_strength"].as_f64().unwrap() - rho).abs() < 0.01 * rho);
+    let text = magcal(&["planar", &file, "--up", "z"], None);
+    assert_eq!(text.code, 0, "{}", text.stderr);
+    assert!(
+        text.stdout.contains(&format!("{dwell} still")),
+        "{}",
+        text.stdout
+    );
+}
+
 #[test]
 fn planar_refuses_what_is_not_planar_and_bad_options() {
     let run = magcal(&["planar", &real("icm20948_mag_300.csv")], None);
