@@ -627,7 +627,9 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
                     what()
                 ));
             }
-            if r.samples_used + r.samples_dropped + r.screened + r.rejected != samples.len() {
+            if r.samples_used + r.samples_dropped + r.dwell + r.screened + r.rejected
+                != samples.len()
+            {
                 return Err(format!(
                     "used + dropped != len {}: {}",
                     samples.len(),
@@ -826,7 +828,7 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
             }
         }
         // Planar fits of the same readings: a result or an error, and a
-        // result gives finite headings.
+        // result gives finite headings and counts every row once.
         let up = rng.any_vec3();
         let planar = calibrate_planar::<T, _>(&readings, &PlanarConfig::with_up(up));
         if let Ok(fit) = planar {
@@ -839,6 +841,15 @@ fn others_case_in<T: Real>(rng: &mut Rng) -> Result<(), String> {
             let h = c.heading_deg(raw);
             if !finite || !h.is_finite() || h.abs() > T::lit(180.0) {
                 return Err(format!("calibrate_planar: bad result {fit:?}, heading {h}"));
+            }
+            let r = &fit.report;
+            if r.samples_used + r.drops.total() + r.dwell + r.screened + r.rejected
+                != readings.len()
+            {
+                return Err(format!(
+                    "calibrate_planar: rows not counted once ({} rows): {r:?}",
+                    readings.len()
+                ));
             }
         }
         // A rotation, a nearly-rotation, or garbage.
