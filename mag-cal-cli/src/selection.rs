@@ -9,17 +9,23 @@
 //!  "clip_levels": [[null, 512], [null, null], [-480, null]],
 //!  "screen": {"centre": [x, y, z], "radius": r},
 //!  "residual_limit": 0.094,
-//!  "runs": [[120, 245]]}
+//!  "runs": [[120, 245]],
+//!  "dwell": [[5, 600], [905, 2100]]}
 //! ```
 //!
 //! `screen` and `residual_limit` are `null` when the fit did not screen or
 //! weight its rows (a clean plain fit, or `--plain`). `runs` lists the
 //! spans of rows `[start, end)` rejected beside runs of rejected rows
-//! ([`mag_cal_core::runs`]); a selection written without it has none. With
-//! `glitch_rules` false, everything else `null` and no runs it is
-//! [`Selection::ALL`]: every finite row used.
+//! ([`mag_cal_core::runs`]); `dwell` the spans of rows set aside as still
+//! periods, a device lying still beyond the first rows of each
+//! ([`mag_cal_core::Dwell`], class `dwell`: not outliers). A selection
+//! written without either has none. With `glitch_rules` false, everything
+//! else `null` and no spans it is [`Selection::ALL`]: every finite row
+//! used.
 
-use mag_cal_core::{runs::RUNS, Drops, Real, Rule, Runs, SampleClass, Selection};
+use mag_cal_core::{
+    runs::RUNS, Calibration, Drops, Dwell, Real, Rule, Runs, Sample, SampleClass, Selection,
+};
 use serde::ser::SerializeMap;
 use serde::{Serialize, Serializer};
 use serde_json::Value;
@@ -58,7 +64,7 @@ pub struct Screen {
 
 /// The core's [`Selection`] widened to `f64`: the `selection` object of the
 /// fit JSON.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SelectionJson {
     /// The zero, rails, repetition and clip rules were applied.
     pub glitch_rules: bool,
@@ -71,11 +77,21 @@ pub struct SelectionJson {
     /// Rows in these spans, beside runs of rejected rows, were rejected.
     #[serde(serialize_with = "spans")]
     pub runs: Runs,
+    /// Rows in these spans `(start, end)`, still periods beyond their first
+    /// rows, were set aside before any fit (disjoint, in the core's order:
+    /// [`Dwell::spans`]).
+    #[serde(serialize_with = "pairs")]
+    pub dwell: Vec<(usize, usize)>,
 }
 
 /// The spans of `runs` as `[[start, end], ...]`.
 pub(crate) fn spans<S: Serializer>(runs: &Runs, serializer: S) -> Result<S::Ok, S::Error> {
-    serializer.collect_seq(runs.spans().iter().map(|&(s, e)| [s, e]))
+    pairs(runs.spans(), serializer)
+}
+
+/// Spans `(start, end)` as `[[start, end], ...]`.
+fn pairs<S: Serializer>(spans: &[(usize, usize)], serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.collect_seq(spans.iter().map(|&(s, e)| [s, e]))
 }
 
 impl SelectionJson {
@@ -86,6 +102,7 @@ impl SelectionJson {
         screen: None,
         residual_limit: None,
         runs: Runs::NONE,
+        dwell: Vec::new(),
     };
 
     /// The core's selection, widened to `f64` (exactly).
@@ -99,12 +116,15 @@ impl SelectionJson {
             }),
             residual_limit: s.residual_limit.map(T::to_f64),
             runs: s.runs,
+            dwell: s.dwell.spans().to_vec(),
         }
     }
 
     /// The core's selection in precision `T` (exact for values that came
-    /// from `T`).
-    pub fn to_core<T: Real>(self) -> Selection<T> {
+    /// from `T`) but for its still periods: the core builds a [`Dwell`]
+    /// only in a fit, so they are [`Dwell::NONE`] here and [`Self::classify`]
+    /// marks their rows.
+    pub fn to_core<T: Real>(&self) -> Selection<T> {
         Selection {
             glitch_rules: self.glitch_rules,
             clip_levels: self.clip_levels.map(|axis| axis.map(|l| l.map(T::lit))),
@@ -113,10 +133,31 @@ impl SelectionJson {
                 .map(|s| (s.centre.map(T::lit), T::lit(s.radius))),
             residual_limit: self.residual_limit.map(T::lit),
             runs: self.runs,
-            // The still periods are not in the fit JSON yet (issue 36's
-            // front ends): none.
-            dwell: mag_cal_core::Dwell::NONE,
+            dwell: Dwell::NONE,
         }
+    }
+
+    /// What the fit did with each row of `samples`, calibrated by `cal` in
+    /// precision `T`: the core's [`Selection::classify`] of
+    /// [`Self::to_core`], with the rows of the still periods that no drop
+    /// rule removed marked [`SampleClass::Dwell`], as the core marks them
+    /// (a drop rule first, then a still period, then the screening, the
+    /// runs and the residual).
+    pub fn classify<T: Real, S: Sample>(
+        &self,
+        cal: &Calibration<T>,
+        samples: &[S],
+    ) -> Vec<SampleClass> {
+        let still = |i: usize| self.dwell.iter().any(|&(s, e)| s <= i && i < e);
+        self.to_core::<T>()
+            .classify(cal, samples)
+            .enumerate()
+            .map(|(i, class)| match class {
+                SampleClass::Dropped(_) => class,
+                _ if still(i) => SampleClass::Dwell,
+                _ => class,
+            })
+            .collect()
     }
 
     /// Reads the `selection` object of a fit JSON; the error names the
@@ -177,22 +218,33 @@ impl SelectionJson {
                 "'selection.residual_limit' must be null or a non-negative number".to_owned(),
             )?),
         };
+        let span = |v: &Value| -> Option<(usize, usize)> {
+            let a = v.as_array().filter(|a| a.len() == 2)?;
+            let end = |v: &Value| v.as_u64().and_then(|x| usize::try_from(x).ok());
+            Some((end(&a[0])?, end(&a[1])?))
+        };
         let runs = match obj.get("runs") {
             None => Runs::NONE,
-            Some(v) => {
-                let span = |v: &Value| -> Option<(usize, usize)> {
-                    let a = v.as_array().filter(|a| a.len() == 2)?;
-                    let end = |v: &Value| v.as_u64().and_then(|x| usize::try_from(x).ok());
-                    Some((end(&a[0])?, end(&a[1])?))
-                };
-                v.as_array()
-                    .and_then(|a| a.iter().map(span).collect::<Option<Vec<_>>>())
-                    .and_then(|spans| Runs::from_spans(&spans))
-                    .ok_or(format!(
-                        "'selection.runs' must be at most {RUNS} pairs [start, end] of row \
+            Some(v) => v
+                .as_array()
+                .and_then(|a| a.iter().map(span).collect::<Option<Vec<_>>>())
+                .and_then(|spans| Runs::from_spans(&spans))
+                .ok_or(format!(
+                    "'selection.runs' must be at most {RUNS} pairs [start, end] of row \
                          indices, each non-empty, ascending and apart"
-                    ))?
-            }
+                ))?,
+        };
+        let dwell = match obj.get("dwell") {
+            None => Vec::new(),
+            Some(v) => v
+                .as_array()
+                .and_then(|a| a.iter().map(span).collect::<Option<Vec<_>>>())
+                .filter(|spans| disjoint(spans))
+                .ok_or(
+                    "'selection.dwell' must be pairs [start, end] of row indices, each \
+                     non-empty, not overlapping"
+                        .to_owned(),
+                )?,
         };
         Ok(Self {
             glitch_rules,
@@ -200,12 +252,21 @@ impl SelectionJson {
             screen,
             residual_limit,
             runs,
+            dwell,
         })
     }
 }
 
+/// Whether `spans` are each non-empty and none overlaps another.
+fn disjoint(spans: &[(usize, usize)]) -> bool {
+    let mut sorted = spans.to_vec();
+    sorted.sort_unstable();
+    sorted.iter().all(|&(s, e)| s < e) && sorted.windows(2).all(|w| w[0].1 <= w[1].0)
+}
+
 /// The name of a row class in `apply --flags`: `used`, `dropped:<rule>`
-/// (the rule's [`Rule::name`]), `screened`, `rejected`.
+/// (the rule's [`Rule::name`]), `dwell` (a still period's row set aside),
+/// `screened`, `rejected`.
 pub fn class_name(class: SampleClass) -> String {
     match class {
         SampleClass::Used => "used".into(),
@@ -267,13 +328,56 @@ mod tests {
             plain,
             serde_json::json!({"glitch_rules": false,
                                "clip_levels": [[null, null], [null, null], [null, null]],
-                               "screen": null, "residual_limit": null, "runs": []})
+                               "screen": null, "residual_limit": null, "runs": [],
+                               "dwell": []})
         );
-        // A selection written before runs were found reads as none.
+        // A selection written before runs and still periods were found
+        // reads as none.
         let old = r#"{"glitch_rules":true,"clip_levels":[[null,1],[null,null],[2,null]],"screen":null,"residual_limit":0.1}"#;
         let old =
             SelectionJson::from_json(&serde_json::from_str(old).expect("json")).expect("reads");
-        assert!(old.runs.is_empty());
+        assert!(old.runs.is_empty() && old.dwell.is_empty());
+        // Still periods, not in order (as the core keeps them).
+        let still = SelectionJson {
+            dwell: vec![(900, 2100), (5, 600)],
+            ..json
+        };
+        let text = serde_json::to_string(&still).expect("serialises");
+        assert!(text.ends_with(r#""dwell":[[900,2100],[5,600]]}"#), "{text}");
+        let back = SelectionJson::from_json(&serde_json::from_str(&text).expect("json"))
+            .expect("reads back");
+        assert_eq!(back, still);
+    }
+
+    /// The rows of a still period are `dwell` unless a drop rule removed
+    /// them; the others keep their class.
+    #[test]
+    fn still_rows_are_classified_after_the_drop_rules() {
+        let mut samples: Vec<[f64; 3]> = (0..12)
+            .map(|i| {
+                let a = f64::from(i) * 0.5;
+                [a.cos(), a.sin(), 0.1 * a]
+            })
+            .collect();
+        samples[4] = [f64::NAN, 0.0, 0.0];
+        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let cal = Calibration::<f64>::new([0.0; 3], identity).expect("a calibration");
+        let selection = SelectionJson {
+            dwell: vec![(3, 6), (10, 12)],
+            ..SelectionJson::ALL
+        };
+        let classes = selection.classify(&cal, &samples);
+        let expected: Vec<SampleClass> = (0..12)
+            .map(|i| match i {
+                4 => SampleClass::Dropped(Rule::NonFinite),
+                3 | 5 | 10 | 11 => SampleClass::Dwell,
+                _ => SampleClass::Used,
+            })
+            .collect();
+        assert_eq!(classes, expected);
+        // Without still periods: the core's classes.
+        let core: Vec<SampleClass> = Selection::<f64>::ALL.classify(&cal, &samples).collect();
+        assert_eq!(SelectionJson::ALL.classify(&cal, &samples), core);
     }
 
     #[test]
@@ -319,6 +423,18 @@ mod tests {
                 r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"runs":[[5,-9]]}"#,
                 "'selection.runs' must be",
             ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"dwell":[[900,2100],[5,901]]}"#,
+                "'selection.dwell' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"dwell":[[7,7]]}"#,
+                "'selection.dwell' must be",
+            ),
+            (
+                r#"{"glitch_rules":true,"clip_levels":[[1,2],[3,4],[5,6]],"screen":null,"residual_limit":null,"dwell":{"a":1}}"#,
+                "'selection.dwell' must be",
+            ),
         ] {
             let err = SelectionJson::from_json(&serde_json::from_str(text).expect("json"))
                 .expect_err(text);
@@ -331,6 +447,7 @@ mod tests {
         assert_eq!(class_name(SampleClass::Used), "used");
         assert_eq!(class_name(SampleClass::Screened), "screened");
         assert_eq!(class_name(SampleClass::Rejected), "rejected");
+        assert_eq!(class_name(SampleClass::Dwell), "dwell");
         assert_eq!(
             class_name(SampleClass::Dropped(Rule::NonFinite)),
             "dropped:non_finite"
