@@ -353,7 +353,7 @@ const RAW_CAPTION = {
   planar: "Raw samples, centred on the planar fit's centre and divided by the field in the plane",
 };
 const CAL_CAPTION = {
-  '3d': 'Calibrated samples on the unit sphere: <span class="used">used</span>, <span class="rejected">rejected</span>, <span class="screened">screened</span>',
+  '3d': 'Calibrated samples on the unit sphere: <span class="used">used</span>, <span class="rejected">rejected</span>, <span class="screened">screened</span>, <span class="dwell">still (set aside)</span>',
   planar: 'Planar calibration: u = K (y − centre) of every sample, on the unit circle (z = 0); the planar fit does not mark rows',
 };
 const NORMS_CAPTION = {
@@ -455,12 +455,20 @@ function show3d(doc) {
     ${figure('outlier share', q.outlier_share, `refused above ${lim.refuse_outlier_share}`)}
     ${figure('columns', html(doc.columns))}
     ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
-    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
+    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.dwell} still, ${f.screened} screened, ${f.rejected} rejected`, stillNote(f))}
     ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
     </table>`;
   $('snippet-c').textContent = doc.snippets.c;
   $('copy-c').disabled = false;
   $('send').disabled = !port;
+}
+
+// Where the rows set aside as still periods lie (a device lying still:
+// no outliers), as magcal's text report names them.
+function stillNote(f) {
+  if (!f.dwell) return '';
+  const rows = [...f.selection.dwell].sort((a, b) => a[0] - b[0]).map(([s, e]) => `${s}–${e - 1}`);
+  return `still: set aside where the device lay still (rows ${rows.join(', ')})`;
 }
 
 const vector = (prefix, v) =>
