@@ -41,3 +41,23 @@ pub fn read_columns(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
 pub fn read_xyz(name: &str) -> Vec<[f64; 3]> {
     read_columns(name, [0, 1, 2])
 }
+
+/// Reads the columns `cols` (0-based) of a CSV with a header and text
+/// columns (as `imu_gnss_1252.csv`): each of the three fields parsed on
+/// its own, rows where one is not a number skipped.
+pub fn read_csv_fields(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
+    let p = path(name);
+    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
+        panic!(
+            "cannot read {} ({e}): is ../shared beside the repo?",
+            p.display()
+        )
+    });
+    text.lines()
+        .filter_map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            let v = |i: usize| f.get(i)?.trim().parse::<f64>().ok();
+            Some([v(cols[0])?, v(cols[1])?, v(cols[2])?])
+        })
+        .collect()
+}

@@ -6,7 +6,7 @@
 //! `cargo test --release -p host-tests --test still_periods -- --nocapture`
 //! prints the table behind the assertions.
 
-use host_tests::real::{path, read_xyz};
+use host_tests::real::{read_csv_fields, read_xyz};
 use mag_cal_core::{calibrate, Config, Error, Fit, SampleClass};
 use nalgebra::Matrix3;
 
@@ -47,15 +47,7 @@ fn recordings() -> Vec<(&'static str, Vec<[f64; 3]>, bool)> {
 /// Columns 6-8 (the raw `magx, magy, magz`) of a CSV with a header and
 /// text columns.
 fn raw_mag(name: &str) -> Vec<[f64; 3]> {
-    let text = std::fs::read_to_string(path(name)).expect("../shared beside the repo");
-    text.lines()
-        .skip(1)
-        .filter_map(|line| {
-            let f: Vec<&str> = line.split(',').collect();
-            let v = |i: usize| f.get(i)?.trim().parse::<f64>().ok();
-            Some([v(6)?, v(7)?, v(8)?])
-        })
-        .collect()
+    read_csv_fields(name, [6, 7, 8])
 }
 
 /// Noise of the still rows: one count (integer rows), or a share of the

@@ -22,7 +22,7 @@ pub enum Error {
     /// Every finite sample is the same point: there is no spread to fit.
     AllSamplesEqual,
     /// The device hardly moved: beside the rows of its still periods
-    /// (set aside, [`crate::steps::dwell`]) too few rows are left.
+    /// (set aside, [`crate::Dwell`]) too few rows are left.
     HardlyMoved {
         /// Rows in motion (outside the still periods, or the longest one).
         moving: usize,

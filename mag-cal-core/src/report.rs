@@ -35,7 +35,7 @@ pub struct Report<T: Real> {
     /// Rows dropped by each rule.
     pub drops: Drops,
     /// Rows kept by the rules but set aside as still periods beyond their
-    /// first rows ([`crate::steps::dwell`], [`crate::SampleClass::Dwell`]):
+    /// first rows ([`crate::Dwell`], [`crate::SampleClass::Dwell`]):
     /// not outliers, and not counted by the outlier share.
     pub dwell: usize,
     /// Rows kept by the rules but screened out: too far from the others.

@@ -450,18 +450,15 @@ pub(crate) const PRIOR_WEIGHT: f32 = 0.001;
 /// within 0.31 %, field strength 0.26 %, M 1.06 % of the fit without them;
 /// a global noise (the median second difference) was not varied further.
 pub(crate) const DWELL_EMA: f64 = 1.0 / 16.0;
-/// The detection reads every this-many-th row (its runs and counts in
-/// rows of the recording). Guards: the rule as measured (every row).
-/// Every 4th row with an average weight of 1/8 halved the pass's cost but
-/// set aside motion: `icm20948_mag_300.csv` with 600 still rows at each
-/// end M 1.8 % off, `mag3_raw_541.csv` as it is 36 rows set aside (`cargo
-/// test --release -p host-tests --test still_periods`).
-pub(crate) const DWELL_STRIDE: usize = 1;
-/// A row's mean absolute second difference enters the noise's average at
-/// most at this many times the average. Guards: a spike (one wild row)
-/// does not inflate the radius of the rows after it, which then formed one
-/// long run of motion set aside as still (the contamination table's spike
-/// cells: median error ratios 1.00 -> 1.19-1.32 without the clip).
+/// A row's mean absolute second difference enters the noise's average
+/// only below this many times the average (above, a spike's rows or the
+/// start of motion: the average is left as it is). Guards: spikes do not
+/// inflate the radius of the rows after them, which then formed one long
+/// run of motion set aside as still (the contamination table's spike
+/// cells: median error ratios 1.00 -> 1.19-1.32 without any clip; with the
+/// second difference clipped to 4 averages instead of skipped, spikes at
+/// 5-10 % still raised the noise without bound: NoSphere in 1.6-2.0 % of
+/// the runs).
 ///
 /// Set with issue 36's core rule. Evidence: `cargo run --release -p
 /// host-tests --bin contamination-table -- 64`; 4 alone tried.
@@ -488,35 +485,19 @@ pub(crate) const DWELL_RADIUS: f64 = 6.0;
 /// [`DWELL_EMA`] (`L0=16`); `cargo run --release -p host-tests --bin
 /// still-stats` (runs of the shared recordings).
 pub(crate) const DWELL_MIN_RUN: usize = 16;
-/// A still period keeps at least this many of its first rows. Guards: the
-/// direction it lies at still counts, as one direction among the motion's.
+/// A run is a still period only when it holds at least a `DWELL_SHARE`-th
+/// of the recording's rows. Guards: a short pause in a long recording,
+/// which weighs little, keeps its rows (`imu_gnss_1252.csv` as it is: a
+/// still start of 80 rows, 6.4 %, beyond the 5 % a recording as it is may
+/// lose); still periods that outweigh a tenth of the rows are set aside.
 ///
-/// Set at `1e1b99f`. Evidence: the `still-probe` command of [`DWELL_EMA`]
-/// (`K0=4`; 8 moved M by more on short recordings).
-pub(crate) const DWELL_KEEP: usize = 4;
-/// A still period keeps `n_motion / DWELL_SHARE` of its rows when that is
-/// more than [`DWELL_KEEP`] (`n_motion`: the rows not set aside). Guards:
-/// the still direction weighs as a 64th of the motion, about what one
-/// direction bin of the sphere holds; and a device that hardly moved keeps
-/// too few rows to be fitted ([`crate::Error::HardlyMoved`]).
-///
-/// Set with issue 36's core rule (the prototype at `1e1b99f`, branch
-/// `still`, had 48). Evidence: `cargo test --release -p host-tests --test
-/// still_periods -- --nocapture`: with 48 `icm20948_mag_300.csv` with
-/// still ends moved M by 0.83 % (one count) to 1.087 % (5x, 3 % noise,
-/// beyond the 1 % target); with 64, 0.42 % and 0.62 % (worst of all
-/// recordings 0.84 %); `imu_gnss_1252.csv` as it is needs K >= 18 (its
-/// still start of 80 rows) to keep 5 % of its rows.
-pub(crate) const DWELL_SHARE: usize = 64;
-/// A run is a still period only when it holds at least this many times
-/// the rows it keeps (`K`): a short pause in a long recording, which would
-/// lose few rows, keeps them all.
-///
-/// Set with issue 36's core rule. Evidence: `cargo test --release -p
-/// host-tests --test still_periods -- --nocapture` (`imu_gnss_1252.csv`
-/// as it is: a still start of 80 rows and pauses of 26-48 rows; with
-/// every run of 16 rows a still period, 91 rows, 7.3 %, were set aside).
-pub(crate) const DWELL_LONG: usize = 3;
+/// Set with issue 36's ball rule (branch `core-dwell`). Evidence: `cargo
+/// test --release -p host-tests --test still_periods -- --nocapture`: no
+/// row of a shared recording as it is set aside; still ends of 0.5x-10x
+/// at one count to 3 % noise: worst b 0.199 %, field 0.057 %, M 0.415 %
+/// of the field. (With `3 max(4, n / 64)`, the old span rule's threshold,
+/// the 80 rows of `imu_gnss_1252.csv` were set aside.)
+pub(crate) const DWELL_SHARE: usize = 10;
 /// A run is a still period only when its radius is at most this many
 /// times the spread of the rows (their RMS distance from their mean).
 /// Guards: rows out of time order (shuffled or interleaved), whose second

@@ -32,6 +32,11 @@ pub trait Real:
     const MIN_POSITIVE: Self;
     /// Largest finite number of the type.
     const MAX: Self;
+    /// No still period ([`crate::Dwell::NONE`]), for the gates that
+    /// reference one: a constant per type, as a generic one cannot be
+    /// borrowed for `'static`.
+    #[doc(hidden)]
+    const NO_DWELL: &'static crate::Dwell<Self>;
     /// Converts a constant, rounding to the nearest representable value.
     fn lit(x: f64) -> Self;
     /// Converts a value computed at run time (a [`crate::Config`] field),
@@ -91,6 +96,7 @@ impl Real for f32 {
     const EPSILON: Self = f32::EPSILON;
     const MIN_POSITIVE: Self = f32::MIN_POSITIVE;
     const MAX: Self = f32::MAX;
+    const NO_DWELL: &'static crate::Dwell<Self> = &crate::Dwell::NONE;
     #[inline]
     fn lit(x: f64) -> Self {
         x as f32
@@ -166,6 +172,7 @@ impl Real for f64 {
     const EPSILON: Self = f64::EPSILON;
     const MIN_POSITIVE: Self = f64::MIN_POSITIVE;
     const MAX: Self = f64::MAX;
+    const NO_DWELL: &'static crate::Dwell<Self> = &crate::Dwell::NONE;
     #[inline]
     fn lit(x: f64) -> Self {
         x

@@ -104,7 +104,7 @@ pub(super) fn finish<T: Real, S: Sample>(
     #[cfg(feature = "robust")]
     let spanned = {
         let mut spanned = 0usize;
-        runs.visit(samples, start.weights.gate.dwell, |s, prev| {
+        runs.visit(samples, |s, prev| {
             if let Some(y) = start.weights.gate.pass(s, prev) {
                 spanned += 1;
                 let within = limit.is_none_or(|l| {

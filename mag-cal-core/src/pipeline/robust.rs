@@ -268,7 +268,7 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
     figures: &mut Figures<T>,
     runs: &'r mut runs::Runs,
     k: usize,
-    dwell: &'r crate::Dwell,
+    dwell: &'r crate::Dwell<T>,
 ) -> Result<Start<'r, T>, Error> {
     let window = &refit::window(k, samples.len());
     figures.drops = screening.drops;

@@ -108,21 +108,13 @@ impl Runs {
         self.missed
     }
 
-    /// Calls `visit(row, row before)` on every row of the spans outside
-    /// the still periods `dwell`.
+    /// Calls `visit(row, row before)` on every row of the spans.
     #[cfg(feature = "robust")]
-    pub(crate) fn visit<S>(
-        &self,
-        samples: &[S],
-        dwell: &crate::Dwell,
-        mut visit: impl FnMut(&S, Option<&S>),
-    ) {
+    pub(crate) fn visit<S>(&self, samples: &[S], mut visit: impl FnMut(&S, Option<&S>)) {
         for &(s, e) in self.spans() {
             let mut prev = s.checked_sub(1).and_then(|j| samples.get(j));
-            for (i, row) in samples.get(s..e).unwrap_or(&[]).iter().enumerate() {
-                if !dwell.contains(s + i) {
-                    visit(row, prev);
-                }
+            for row in samples.get(s..e).unwrap_or(&[]) {
+                visit(row, prev);
                 prev = Some(row);
             }
         }
@@ -131,78 +123,33 @@ impl Runs {
     /// The pieces of `samples` outside the spans, each at most `size` rows,
     /// with its first row's index and the row before it in `samples` (the
     /// repetition rule reads it). Without spans, the chunks of `size`.
-    /// (The passes take their pieces from their gate, [`crate::steps::rules`],
-    /// which skips the still periods too.)
-    #[cfg(test)]
+    #[inline(always)]
     pub(crate) fn pieces<'a, S>(
         &'a self,
         samples: &'a [S],
         size: usize,
     ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
-        self.pieces_outside(&[], samples, size)
-    }
-
-    /// [`Runs::pieces`] outside the spans `more` too (in any order; they
-    /// may overlap these: the still periods, [`crate::steps::dwell`]).
-    #[inline(always)]
-    pub(crate) fn pieces_outside<'a, S>(
-        &'a self,
-        more: &'a [(usize, usize)],
-        samples: &'a [S],
-        size: usize,
-    ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a {
+        let size = size.max(1);
         let spans = self.spans();
-        let mut at = Cursor::default();
+        let (mut at, mut k) = (0usize, 0usize);
         core::iter::from_fn(move || {
-            let (start, end) = at.next(spans, more, samples.len(), size)?;
-            let piece = samples.get(start..end)?;
-            let prev = start.checked_sub(1).and_then(|j| samples.get(j));
+            // Past the spans that begin at or before `at`: at most one
+            // step a span.
+            while let Some(&(s, e)) = spans.get(k) {
+                if at < s {
+                    break;
+                }
+                at = at.max(e);
+                k += 1;
+            }
+            let stop = spans.get(k).map_or(samples.len(), |&(s, _)| s);
+            let end = stop.min(samples.len()).min(at.saturating_add(size));
+            let piece = samples.get(at..end).filter(|p| !p.is_empty())?;
+            let prev = at.checked_sub(1).and_then(|j| samples.get(j));
+            let start = at;
+            at = end;
             Some((start, prev, piece))
         })
-    }
-}
-
-/// Where [`Runs::pieces_outside`] stands: the next row.
-#[derive(Clone, Copy, Debug, Default)]
-struct Cursor {
-    at: usize,
-}
-
-impl Cursor {
-    /// The next piece `start..end` of `len` rows outside the spans of both
-    /// lists (in any order; they may overlap), at most `size` rows. Out of
-    /// line and not generic: one copy for every pass (inlined, each pass's
-    /// loop took about 130 bytes of flash more, LS9 + ADC2). A few spans
-    /// each, read whole at each piece: no index to keep.
-    #[inline(never)]
-    fn next(
-        &mut self,
-        spans: &[(usize, usize)],
-        more: &[(usize, usize)],
-        len: usize,
-        size: usize,
-    ) -> Option<(usize, usize)> {
-        // Past every span that holds `at` (a span may end in another).
-        let mut at = self.at;
-        let mut moved = true;
-        while moved {
-            moved = false;
-            for &(s, e) in spans.iter().chain(more) {
-                if s <= at && at < e {
-                    at = e;
-                    moved = true;
-                }
-            }
-        }
-        let stop = spans
-            .iter()
-            .chain(more)
-            .map(|&(s, _)| s)
-            .filter(|&s| s > at)
-            .fold(len, usize::min);
-        let end = stop.min(len).min(at.saturating_add(size.max(1)));
-        self.at = end.max(at);
-        (end > at).then_some((at, end))
     }
 }
 
@@ -369,7 +316,7 @@ mod tests {
         // Each row of the spans once, with the row before it.
         let rows: [u16; 1000] = core::array::from_fn(|i| i as u16);
         let (mut seen, mut tenth) = (0, 0);
-        runs.visit(&rows, &crate::Dwell::NONE, |&row, prev| {
+        runs.visit(&rows, |&row, prev| {
             assert_eq!(prev.copied(), row.checked_sub(1));
             seen += 1;
             tenth += usize::from(row % 10 == 0);
@@ -412,27 +359,5 @@ mod tests {
         assert!(Runs::from_spans(&too_many[..RUNS]).is_some());
         let mut ends = Runs::NONE.pieces(&rows, 32).map(|(s, _, p)| s + p.len());
         assert!([32, 64, 96, 100].into_iter().eq(ends.by_ref()));
-    }
-
-    #[test]
-    fn the_pieces_skip_both_lists_of_spans() {
-        let rows: [usize; 100] = core::array::from_fn(|i| i);
-        let runs = Runs::from_spans(&[(10, 20), (50, 60)]).unwrap();
-        // Overlapping, touching and apart.
-        let more = [(0, 3), (15, 25), (25, 30), (55, 58), (90, 100)];
-        let inside = |i: usize| runs.contains(i) || more.iter().any(|&(s, e)| s <= i && i < e);
-        let mut next = 0;
-        for (start, prev, piece) in runs.pieces_outside(&more, &rows, 7) {
-            assert_eq!(prev, start.checked_sub(1).map(|j| &rows[j]));
-            assert!(piece.len() <= 7);
-            for &i in piece {
-                while inside(next) {
-                    next += 1;
-                }
-                assert_eq!(i, next);
-                next += 1;
-            }
-        }
-        assert_eq!(next, 90);
     }
 }

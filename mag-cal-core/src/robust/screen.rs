@@ -45,7 +45,7 @@ use crate::sample::Sample;
 use crate::steps::methods::MAD_TO_SIGMA;
 use crate::steps::moments::BLOCK;
 use crate::steps::normalize::{Normalization, Scan};
-use crate::steps::rules::{check, count_drops, every, Ball, Drops, Gate, Rules};
+use crate::steps::rules::{check, count_drops, every, pieces, Ball, Drops, Gate, Rules};
 use crate::tuning::{
     CLIP_HINT_ROWS, CLIP_MIN_ROWS, CLIP_SHARE, CRUDE_SHARE, MAX_LEVELS, RECENTRE_GAIN,
     RECENTRE_MORE_ROWS, RECENTRE_RADIUS, RESOLVED_BINS, SCREEN_RADIUS, SUBSAMPLE_ROWS,
@@ -563,7 +563,7 @@ fn visit<T: Real, S: Sample>(
     stride: usize,
     f: &mut dyn FnMut([T; 3]),
 ) {
-    for (_, prev, block) in gate.pieces(&crate::Runs::NONE, samples, piece) {
+    for (prev, block) in pieces(samples, piece) {
         for (_, s, last) in every(block, prev, stride) {
             if let Some(y) = gate.pass(s, last) {
                 f(y);

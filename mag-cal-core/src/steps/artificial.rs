@@ -406,12 +406,12 @@ fn sums<T: Real, S: Sample>(
     // The plain pass (every finite row, weight 1) needs neither the rules
     // nor the residuals: its loop is the cheaper one.
     // By reference: a copy took stack in the method's deepest frame.
-    let (runs, dwell): (&Runs, &[(usize, usize)]) = match &weighted {
+    let runs: &Runs = match &weighted {
         #[cfg(any(feature = "robust", test, feature = "bench-internals"))]
-        Measure::Tails(_) => (&Runs::NONE, &[]),
-        Measure::Gated(pass, _) => (pass.runs, pass.gate.dwell.spans()),
+        Measure::Tails(_) => &Runs::NONE,
+        Measure::Gated(pass, _) => pass.runs,
     };
-    for (_, block_prev, block) in runs.pieces_outside(dwell, samples, BLOCK) {
+    for (_, block_prev, block) in runs.pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);
@@ -455,7 +455,7 @@ fn row_sums<T: Real, S: Sample>(
 ) -> usize {
     let mut count = 0usize;
     let mut buf = [[T::zero(); 4]; CHUNK];
-    for (_, block_prev, block) in gate.pieces(&Runs::NONE, samples, BLOCK) {
+    for (_, block_prev, block) in Runs::NONE.pieces(samples, BLOCK) {
         let mut a = [T::zero(); SUMS];
         for (chunk_prev, chunk) in pieces(block, CHUNK) {
             let prev = chunk_prev.or(block_prev);
@@ -764,7 +764,7 @@ mod tests {
         assert_eq!(rows, plain);
         samples[17] = [0; 3];
         samples[400] = samples[399];
-        let gate = Gate::of(Rules::GLITCHES, &crate::Dwell::NONE);
+        let gate = Gate::only(Rules::GLITCHES);
         let pass = Pass {
             gate: &gate,
             runs: &Runs::NONE,

@@ -1,312 +1,270 @@
-//! Still periods (issue 36): the rows of a device lying still, beyond the
-//! first few, are set aside before any fit.
+//! Still periods (issue 36): the rows of a device lying still are set
+//! aside before any fit.
 //!
 //! A log usually starts and ends with the device lying still. Every
 //! equal-weight least-squares step lets such a dense cluster outweigh the
 //! rotation, and the screening's median centre sits inside it; so the rows
-//! of a still period beyond its first `K` are left out of every pass, as
-//! the drop rules' rows are.
+//! a still period holds are left out of every pass, as the drop rules'
+//! rows are.
 //!
-//! One pass over the rows the drop rules keep ([`detect`], in the scan):
+//! Row by row in the scan's sums loop ([`Tracker`]), over the rows the
+//! drop rules keep:
 //!
 //! - the local noise `sigma` is an exponential moving average (weight
 //!   [`DWELL_EMA`]) of the mean over the axes of `|x[i] - 2 x[i-1] +
 //!   x[i-2]|`, divided by [`DWELL_NOISE`] (the mean absolute second
-//!   difference of white noise of sigma 1);
+//!   difference of white noise of sigma 1); a second difference beyond
+//!   [`DWELL_CLIP`] averages (a spike, the start of motion) leaves it;
 //! - a time run is a stretch of consecutive kept rows each within
-//!   [`DWELL_RADIUS`]` sigma` (Euclidean) of the mean of the run so far;
-//!   a row farther starts a new run;
-//! - the [`DWELL_SPANS`] longest runs are kept.
+//!   [`DWELL_RADIUS`]` sigma` (Euclidean) of the moving average (weight
+//!   [`DWELL_EMA`]) of the run's rows; a row farther starts a new run;
+//! - a run of at least a [`DWELL_SHARE`](crate::tuning::DWELL_SHARE)-th of the rows (and
+//!   [`DWELL_MIN_RUN`]) leaves a ball: about the run's moving average at
+//!   its end, of [`DWELL_RADIUS`] times its rows' mean sigma. At most
+//!   [`DWELL_SPANS`], the first.
 //!
-//! After the scan's sums ([`Detection::decide`]), a run of at least
-//! [`DWELL_MIN_RUN`] rows and [`DWELL_LONG`]` K` whose radius is at most [`DWELL_SCALE`] times
-//! the rows' spread is a still period: its first `K` rows are kept and the
-//! rest set aside, `K = max(DWELL_KEEP, n_motion / DWELL_SHARE)` with
-//! `n_motion` the rows left (a fixed point, iterated). The spread guards
-//! rows that are not in time order (a shuffled or interleaved recording):
-//! their second differences are as large as their spread, and every row
-//! would lie in one run.
+//! After the scan's sums ([`Tracker::finish`]), a ball whose radius is
+//! below [`DWELL_SCALE`] times the rows' spread is a still period. The
+//! spread guards rows that are not in time order (a shuffled or
+//! interleaved recording): their second differences are as large as their
+//! spread, and every row would lie in one run.
 //!
-//! No row is copied and nothing is stored per row: the set-aside rows are
-//! a few spans ([`Dwell`]), which every later pass skips as it skips the
-//! spans beside runs of outliers ([`crate::robust::runs`]). Too few rows
-//! left beside the still periods are refused as
+//! The rule is then a pure function of the row: a row inside a still
+//! period's ball is set aside ([`Dwell::holds`]), in every pass, as the
+//! screening ball screens. No row is copied and nothing is stored per row.
+//! A moving device that passes through a still orientation loses the rows
+//! it has there, a cap of the sphere as wide as a few noise sigmas. Too
+//! few rows left beside the still periods are refused as
 //! [`crate::Error::HardlyMoved`]. A recording that is one run from end to
 //! end (a device that never moved, a noise ball) is not set aside (its
 //! radius is its spread) and keeps its refusal (no sphere): it cannot be
 //! told from rows out of time order, which are one run too.
 
-use crate::sample::Sample;
-use crate::steps::rules::{check, every, Gate, Rules};
+use crate::steps::rules::Ball;
 use crate::tuning::{
-    DWELL_CLIP, DWELL_EMA, DWELL_KEEP, DWELL_LONG, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS,
-    DWELL_SCALE, DWELL_SHARE, DWELL_STRIDE,
+    DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE,
 };
 use crate::Real;
 
-/// At most this many still periods are set aside: the longest runs.
-pub const DWELL_SPANS: usize = 4;
+/// At most this many still periods are set aside: the first.
+pub const DWELL_SPANS: usize = 3;
 
-/// The rows set aside as still periods: half-open spans `start..end` of
-/// row indices, disjoint (not in order), and the rows in them that the
-/// drop rules keep.
+/// The still periods set aside: a ball (sensor units) about each, and the
+/// rows kept by the drop rules that lie in one.
 ///
 /// ```
 /// use mag_cal_core::Dwell;
-/// assert!(Dwell::NONE.is_empty() && !Dwell::NONE.contains(3));
+/// let none = Dwell::<f32>::NONE;
+/// assert!(none.is_empty() && !none.holds([1.0, 2.0, 3.0]) && none.rows() == 0);
 /// ```
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Dwell {
-    spans: [(usize, usize); DWELL_SPANS],
-    len: usize,
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dwell<T: Real> {
+    /// The first `len` are the still periods'. Not options: the tag took
+    /// 4 bytes a ball, and a `Dwell` is in the report, whose copies are
+    /// on the robust path's deepest stack.
+    balls: [Ball<T>; DWELL_SPANS],
+    len: u8,
     rows: usize,
 }
 
-impl Default for Dwell {
+impl<T: Real> Default for Dwell<T> {
     fn default() -> Self {
         Self::NONE
     }
 }
 
-impl Dwell {
+impl<T: Real> Dwell<T> {
     /// No row set aside.
     pub const NONE: Self = Self {
-        spans: [(0, 0); DWELL_SPANS],
+        balls: [Ball {
+            centre: [T::MAX; 3],
+            radius_sq: T::MAX,
+        }; DWELL_SPANS],
         len: 0,
         rows: 0,
     };
 
-    /// The spans (disjoint, not in order).
-    pub fn spans(&self) -> &[(usize, usize)] {
-        self.spans.get(..self.len).unwrap_or(&[])
+    fn used(&self) -> &[Ball<T>] {
+        self.balls.get(..usize::from(self.len)).unwrap_or(&[])
     }
 
-    /// Rows set aside (those in the spans that the drop rules keep).
+    /// The still periods: the centre and the radius of each ball, sensor
+    /// units.
+    pub fn balls(&self) -> impl Iterator<Item = ([T; 3], T)> + '_ {
+        self.used()
+            .iter()
+            .map(|b| (b.centre, b.radius_sq.square_root()))
+    }
+
+    /// Rows set aside (those in a ball that the drop rules keep).
     pub fn rows(&self) -> usize {
         self.rows
     }
 
-    /// Whether no row is set aside.
+    /// Whether no still period is set aside.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
 
-    /// Whether row `i` lies in a span.
-    pub fn contains(&self, i: usize) -> bool {
-        self.spans().iter().any(|&(s, e)| s <= i && i < e)
-    }
-}
-
-/// Whether one time run holds all but `1 / DWELL_SHARE` of the `kept`
-/// rows the rules keep, `longest` those of the longest: then the device
-/// never moved, and the rows outside that run and those in it.
-#[cfg(test)]
-pub(crate) fn never_moved(longest: usize, kept: usize) -> Option<(usize, usize)> {
-    (kept > 0 && longest + kept / DWELL_SHARE >= kept).then_some((kept - longest, longest))
-}
-
-/// A time run: its first row, one past its last, the rows kept in it,
-/// and its radius at its end (sensor units).
-#[derive(Clone, Copy, Debug)]
-struct Run<T> {
-    start: usize,
-    end: usize,
-    kept: usize,
-    radius: T,
-}
-
-/// What [`detect`] found: the longest runs and the rows kept.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Detection<T> {
-    runs: [Run<T>; DWELL_SPANS],
-    len: usize,
-    kept: usize,
-}
-
-/// The pass of the rule: the [`DWELL_SPANS`] longest time runs of the rows
-/// `gate` passes (its out-of-line check: no copy of the rules here).
-#[inline(never)]
-pub(crate) fn detect<T: Real, S: Sample>(samples: &[S], gate: &Gate<T>) -> Detection<T> {
-    let zero = T::zero();
-    let mut found = Detection {
-        runs: [Run {
-            start: 0,
-            end: 0,
-            kept: 0,
-            radius: zero,
-        }; DWELL_SPANS],
-        len: 0,
-        kept: 0,
-    };
-    let gain = T::lit(DWELL_RADIUS / DWELL_NOISE);
-    let weight = T::lit(DWELL_EMA);
-    let third = T::lit(1.0 / 3.0);
-    let clip = T::lit(DWELL_CLIP);
-    // Scalars written out per axis: arrays kept the rows in memory at
-    // opt-level "s" (about 30 instructions a row more).
-    // The two rows kept before (`seen` of them, up to 2) and the noise's
-    // average; before the first second difference the radius is
-    // unbounded: the first rows join the first run.
-    let (mut a0, mut a1, mut a2) = (zero, zero, zero);
-    let (mut b0, mut b1, mut b2) = (zero, zero, zero);
-    let mut seen = 0u8;
-    let mut ema = T::MAX;
-    // The open run: its first row (the origin of its sums), the sums of
-    // `y - first` and their count, and the run itself.
-    let (mut f0, mut f1, mut f2) = (zero, zero, zero);
-    let (mut s0, mut s1, mut s2) = (zero, zero, zero);
-    let mut count = zero;
-    let mut run = Run {
-        start: 0,
-        end: 0,
-        kept: 0,
-        radius: T::MAX,
-    };
-    // A plain gate: the conversion alone, inline (the out-of-line check
-    // cost about 40 instructions a row).
-    let plain = gate.is_plain();
-    for (i, s, prev) in every(samples, None, DWELL_STRIDE) {
-        let row = if plain {
-            check::<T, S>(s, None, &Rules::PLAIN).ok()
-        } else {
-            gate.admit(s, prev).ok()
-        };
-        let Some([y0, y1, y2]) = row else {
-            continue;
-        };
-        found.kept += DWELL_STRIDE;
-        if seen >= 2 {
-            let d =
-                ((y0 - b0 - b0 + a0).abs() + (y1 - b1 - b1 + a1).abs() + (y2 - b2 - b2 + a2).abs())
-                    * third;
-            // A second difference beyond `DWELL_CLIP` averages counts
-            // as that much: a spike does not inflate the noise of the rows
-            // after it (which then formed one long run of motion).
-            ema = if ema < T::MAX {
-                ema + (d.min(ema * clip) - ema) * weight
-            } else {
-                d
-            };
-        } else {
-            seen += 1;
-        }
-        (a0, a1, a2) = (b0, b1, b2);
-        (b0, b1, b2) = (y0, y1, y2);
-        let radius = if ema < T::MAX { ema * gain } else { T::MAX };
-        // `|y - mean| > radius`, times the count (no division).
-        let (d0, d1, d2) = (
-            (y0 - f0) * count - s0,
-            (y1 - f1) * count - s1,
-            (y2 - f2) * count - s2,
-        );
-        let far = radius * count;
-        // The first row of a run is its own reference.
-        if run.kept == 0 || d0 * d0 + d1 * d1 + d2 * d2 > far * far {
-            // Runs too short to be still periods are not kept (on moving
-            // data nearly every run: a call a row or two).
-            if run.kept >= DWELL_MIN_RUN {
-                found.close(run);
-            }
-            run.start = i;
-            run.kept = 0;
-            (f0, f1, f2) = (y0, y1, y2);
-            (s0, s1, s2) = (zero, zero, zero);
-            count = zero;
-        }
-        s0 += y0 - f0;
-        s1 += y1 - f1;
-        s2 += y2 - f2;
-        count += T::one();
-        run.kept += DWELL_STRIDE;
-        run.end = i + 1;
-        run.radius = radius;
-    }
-    if run.kept >= DWELL_MIN_RUN {
-        found.close(run);
-    }
-    found
-}
-
-impl<T: Real> Detection<T> {
-    /// [`never_moved`] of the runs found.
-    #[cfg(test)]
-    pub(crate) fn never_moved(&self) -> Option<(usize, usize)> {
-        let runs = self.runs.get(..self.len).unwrap_or(&[]);
-        never_moved(runs.iter().map(|r| r.kept).max().unwrap_or(0), self.kept)
+    /// Whether the row `y` (sensor units) lies in a still period's ball.
+    #[inline(always)]
+    pub fn holds(&self, y: [T; 3]) -> bool {
+        self.used().iter().any(|b| b.contains(y))
     }
 
-    /// Keeps `run` if it is among the longest (in the place of the
-    /// shortest kept: the runs are not in time order).
-    fn close(&mut self, run: Run<T>) {
-        let at = if self.len < DWELL_SPANS {
+    /// Adds a ball, when a slot is free.
+    fn push(&mut self, centre: [T; 3], radius_sq: T) {
+        if let Some(slot) = self.balls.get_mut(usize::from(self.len)) {
+            // Component by component: the tracker's centre, written
+            // whole into its own `found`, linked `memmove` (1.5 kB).
+            let [c0, c1, c2] = centre;
+            slot.centre[0] = c0;
+            slot.centre[1] = c1;
+            slot.centre[2] = c2;
+            slot.radius_sq = radius_sq;
             self.len += 1;
-            self.len - 1
-        } else {
-            let (k, shortest) = self
-                .runs
-                .iter()
-                .enumerate()
-                .min_by_key(|(_, r)| r.kept)
-                .map_or((0, usize::MAX), |(k, r)| (k, r.kept));
-            if shortest >= run.kept {
-                return;
-            }
-            k
-        };
-        if let Some(slot) = self.runs.get_mut(at) {
-            *slot = run;
         }
     }
 
-    /// The spans set aside, given the spread of the rows (`scale`, the RMS
-    /// distance from their mean, sensor units): of each run of at least
-    /// [`DWELL_MIN_RUN`] rows and [`DWELL_LONG`]` K` within
-    /// [`DWELL_SCALE`]` scale`, the rows after its first `K` (the rows set
-    /// aside are counted by the caller: those of the spans the rules keep).
-    pub(crate) fn decide(&self, scale: T) -> Dwell {
-        let mut dwell = Dwell::NONE;
-        let runs = self.runs.get(..self.len).unwrap_or(&[]);
-        if !(scale > T::zero()) {
-            // No spread (every row equal): nothing to set aside.
-            return dwell;
+    /// Counts `rows` set aside (the scan's count).
+    pub(crate) fn set_rows(&mut self, rows: usize) {
+        self.rows = rows;
+    }
+}
+
+/// The pass of the rule, row by row in the scan's sums loop
+/// ([`Tracker::push`]): the balls of the first [`DWELL_SPANS`] runs long
+/// enough.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Tracker<T: Real> {
+    /// The two rows before (`seen` of them, up to 2).
+    a: [T; 3],
+    b: [T; 3],
+    seen: u8,
+    /// The noise's average (zero before the first second difference above
+    /// zero).
+    noise: T,
+    /// The open run: the moving average of its rows, their count, and
+    /// the sum of their noise (the second differences as averaged).
+    mean: [T; 3],
+    kept: usize,
+    noise_sum: T,
+    /// The rows of a run long enough to be a still period.
+    long: usize,
+    /// The balls of the runs that were long enough, in time order.
+    found: Dwell<T>,
+}
+
+impl<T: Real> Tracker<T> {
+    /// A tracker of runs at least `long` rows long (and
+    /// [`DWELL_MIN_RUN`]).
+    pub(crate) fn new(long: usize) -> Self {
+        let zero = [T::zero(); 3];
+        Self {
+            a: zero,
+            b: zero,
+            seen: 0,
+            noise: T::zero(),
+            mean: zero,
+            kept: 0,
+            noise_sum: T::zero(),
+            long: long.max(DWELL_MIN_RUN),
+            // Zeros, as the rest (one `memclr`; `Dwell::NONE`'s constants
+            // were a store each).
+            found: Dwell {
+                balls: [Ball {
+                    centre: zero,
+                    radius_sq: T::zero(),
+                }; DWELL_SPANS],
+                len: 0,
+                rows: 0,
+            },
         }
-        let limit = scale * T::lit(DWELL_SCALE);
-        let still = |r: &Run<T>, keep: usize| {
-            r.kept >= DWELL_MIN_RUN.max(keep * DWELL_LONG) && r.radius <= limit
+    }
+
+
+    /// The next row the rules keep.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, y: [T; 3]) {
+        let [y0, y1, y2] = y;
+        let ([a0, a1, a2], [b0, b1, b2]) = (self.a, self.b);
+        let w = T::lit(DWELL_EMA);
+        let mut d = T::zero();
+        if self.seen >= 2 {
+            // The sum over the axes of `|y - 2 b + a|` (three times their
+            // mean, which the radius divides out).
+            d = (y0 - b0 - b0 + a0).abs() + (y1 - b1 - b1 + a1).abs() + (y2 - b2 - b2 + a2).abs();
+            // A second difference beyond `DWELL_CLIP` averages is a
+            // glitch's (a spike's three rows) or the start of motion: it
+            // leaves the noise as it is (capped at that much instead, 10 %
+            // of spikes raised the noise without bound, and one run of
+            // motion was set aside as still). The first one above zero
+            // starts the average.
+            if !(self.noise > T::zero()) {
+                self.noise = d;
+            } else if d < self.noise * T::lit(DWELL_CLIP) {
+                self.noise = self.noise + (d - self.noise) * w;
+            } else {
+                d = self.noise;
+            }
+        } else {
+            self.seen += 1;
+        }
+        (self.a, self.b) = (self.b, y);
+        // [`DWELL_RADIUS`] local sigmas (unbounded before the first second
+        // difference above zero: rows equal till then join the first run).
+        let r = if self.noise > T::zero() {
+            self.noise * T::lit(DWELL_RADIUS / DWELL_NOISE / 3.0)
+        } else {
+            T::MAX
         };
-        // K = max(DWELL_KEEP, n_motion / DWELL_SHARE): a fixed point,
-        // reached in a few steps (K grows with n_motion, which shrinks as
-        // K grows).
-        let mut keep = DWELL_KEEP;
-        for _ in 0..8 {
-            let aside: usize = runs
-                .iter()
-                .filter(|r| still(r, keep))
-                .map(|r| r.kept.saturating_sub(keep))
-                .sum();
-            keep = DWELL_KEEP.max(self.kept.saturating_sub(aside) / DWELL_SHARE);
+        let m = self.mean;
+        let (d0, d1, d2) = (y0 - m[0], y1 - m[1], y2 - m[2]);
+        // The first row of a run is its own mean.
+        if self.kept == 0 || d0 * d0 + d1 * d1 + d2 * d2 > r * r {
+            self.close();
+            self.mean = y;
+            self.kept = 0;
+            self.noise_sum = T::zero();
+        } else {
+            self.mean = [m[0] + d0 * w, m[1] + d1 * w, m[2] + d2 * w];
         }
-        // In the order of the runs kept (not time order: the passes'
-        // pieces do not need it).
-        for r in runs.iter().filter(|r| still(r, keep)) {
-            let start = r.start.saturating_add(keep);
-            if start < r.end {
-                if let Some(slot) = dwell.spans.get_mut(dwell.len) {
-                    *slot = (start, r.end);
-                    dwell.len += 1;
+        self.kept += 1;
+        self.noise_sum += d;
+    }
+
+    /// Keeps the open run's ball if the run is long enough (and a slot is
+    /// free): the moving average of its rows, and [`DWELL_RADIUS`] sigmas
+    /// of their mean noise (the noise at its end is a still period's last
+    /// rows alone: a quiet end of a noisy period left most of it outside).
+    #[inline(never)]
+    fn close(&mut self) {
+        if self.kept < self.long {
+            return;
+        }
+        let radius =
+            self.noise_sum / T::from_count(self.kept) * T::lit(DWELL_RADIUS / DWELL_NOISE / 3.0);
+        self.found.push(self.mean, radius * radius);
+    }
+
+    /// The still periods, given the spread of the rows (`scale`, the RMS
+    /// distance from their mean, sensor units): the balls of the runs
+    /// found whose radius is below [`DWELL_SCALE`]` scale` (the rows set
+    /// aside are counted by the caller).
+    pub(crate) fn finish(&mut self, scale: T) -> Dwell<T> {
+        self.close();
+        let limit = scale * T::lit(DWELL_SCALE);
+        // In place, the balls kept moving down (each read before written).
+        let found = usize::from(self.found.len);
+        self.found.len = 0;
+        for k in 0..found {
+            if let Some(&Ball { centre, radius_sq }) = self.found.balls.get(k) {
+                if radius_sq < limit * limit {
+                    self.found.push(centre, radius_sq);
                 }
             }
         }
-        dwell
-    }
-}
-
-/// Counts `rows` set aside (the caller's count of the rows of the spans
-/// that the rules keep).
-impl Dwell {
-    pub(crate) fn set_rows(&mut self, rows: usize) {
-        self.rows = rows;
+        self.found
     }
 }
 
@@ -366,10 +324,11 @@ mod tests {
         out
     }
 
-    fn dwell_of(rows: &[[f64; 3]]) -> Dwell {
-        use crate::steps::rules::Rules;
-        let gate = Gate::of(Rules::<f64>::GLITCHES, &Dwell::NONE);
-        let found = detect(rows, &gate);
+    fn dwell_of(rows: &[[f64; 3]]) -> Dwell<f64> {
+        let mut runs = Tracker::new(rows.len() / crate::tuning::DWELL_SHARE);
+        for r in rows {
+            runs.push(*r);
+        }
         // The spread of the rows about their mean.
         let n = rows.len() as f64;
         let mean: Vec<f64> = (0..3)
@@ -380,28 +339,26 @@ mod tests {
             .map(|r| (0..3).map(|a| (r[a] - mean[a]).powi(2)).sum::<f64>())
             .sum::<f64>()
             / n;
-        let mut d = found.decide(var.sqrt());
-        let rows = d.spans().iter().map(|&(s, e)| e - s).sum();
-        d.set_rows(rows);
-        d
+        runs.finish(var.sqrt())
     }
 
     #[test]
-    fn still_ends_are_set_aside_but_their_first_rows() {
+    fn still_ends_are_set_aside() {
         let motion = spiral(600, 0.5, 1);
         let rows = with_still_ends(&motion, 1200, 0.5);
         let d = dwell_of(&rows);
-        // Two spans, each the still end but its first K rows (K =
-        // max(4, 600 / 48) = 12, give or take the rows the runs take
-        // from the motion).
-        assert_eq!(d.spans().len(), 2, "{d:?}");
-        let mut spans = d.spans().to_vec();
-        spans.sort();
-        let [(s0, e0), (s1, e1)] = [spans[0], spans[1]];
-        assert!(s0 <= 20 && (1190..=1210).contains(&e0), "{d:?}");
-        assert!((1800..=1830).contains(&s1) && e1 == rows.len(), "{d:?}");
-        assert!(d.rows() > 2300);
-        assert!(d.contains(s0) && !d.contains(e0));
+        // Two balls, one about each still end, of about 6 sigmas (noise
+        // 0.5 a row and axis).
+        let balls: Vec<([f64; 3], f64)> = d.balls().collect();
+        assert_eq!(balls.len(), 2, "{d:?}");
+        for (&(c, r), end) in balls.iter().zip([rows[0], rows[rows.len() - 1]]) {
+            let off = (0..3).map(|a| (c[a] - end[a]).powi(2)).sum::<f64>().sqrt();
+            assert!(off < 1.0 && (2.0..4.5).contains(&r), "{c:?} {r} {end:?}");
+        }
+        // Every still row in a ball, and few of the motion's.
+        let held = |range: core::ops::Range<usize>| rows[range].iter().filter(|y| d.holds(**y)).count();
+        assert!(held(0..1200) > 1195 && held(1800..3000) > 1195);
+        assert!(held(1200..1800) < 12, "{}", held(1200..1800));
     }
 
     #[test]
@@ -425,12 +382,11 @@ mod tests {
     }
 
     #[test]
-    fn a_device_that_never_moved_is_one_run() {
+    fn a_device_that_never_moved_is_not_set_aside() {
+        // One run from end to end: its radius (6 sigmas) is beyond its
+        // spread (about 1.7 sigmas), as rows out of time order.
         let rows = with_still_ends(&[[50.0, 20.0, -30.0]], 500, 1.0);
-        use crate::steps::rules::Rules;
-        let gate = Gate::of(Rules::<f64>::GLITCHES, &Dwell::NONE);
-        assert!(detect(&rows, &gate).never_moved().is_some());
-        assert!(detect(&spiral(600, 1.0, 3), &gate).never_moved().is_none());
+        assert!(dwell_of(&rows).is_empty());
     }
 
     /// The batch fit: still ends of 5x the motion leave the result, and

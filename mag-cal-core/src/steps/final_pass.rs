@@ -204,7 +204,7 @@ impl<T: Real> FinalSums<T> {
             directions,
         };
         let (hist, cells, acc) = (&mut self.hist, &mut self.cells, &mut self.acc);
-        for (_, prev, block) in gate.pieces(runs, samples, BLOCK) {
+        for (_, prev, block) in runs.pieces(samples, BLOCK) {
             final_block(block, prev, gate, &spec, hist, cells, acc);
         }
     }

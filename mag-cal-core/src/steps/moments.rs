@@ -166,7 +166,7 @@ impl<T: Real> Moments<T> {
         };
         let mut finder = runs.map(|r| RunFinder::new(r, stride));
         let mut sums = [T::zero(); COUNT];
-        for (start, prev, block) in gate.pieces(skip, samples, BLOCK) {
+        for (start, prev, block) in skip.pieces(samples, BLOCK) {
             let mut mask = [0u32; MASK_WORDS];
             let kept = select(
                 block,

@@ -9,6 +9,7 @@ use nalgebra::Vector3;
 
 use crate::sample::Sample;
 use crate::steps::dwell::{self, Dwell};
+use crate::tuning::DWELL_SHARE;
 use crate::steps::rules::{count_drops, Drops, Gate, Rules};
 use crate::{Error, Real};
 
@@ -61,9 +62,9 @@ pub(crate) struct Scan<T: Real> {
     /// The rules the later passes apply: the glitch rules only when they
     /// dropped a row here, and no clip levels (screening finds those).
     pub rules: Rules<T>,
-    /// The still periods set aside ([`crate::steps::dwell`]): `used` and
+    /// The still periods set aside ([`crate::Dwell`]): `used` and
     /// the normalisation leave them out.
-    pub dwell: Dwell,
+    pub dwell: Dwell<T>,
 }
 
 /// One pass over the samples: applies the drop rules (the glitch rules
@@ -79,7 +80,7 @@ pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<
 }
 
 /// [`scan`] that, with `still`, also sets the still periods aside
-/// ([`crate::steps::dwell`]: one pass more, over the rows the rules keep).
+/// ([`crate::Dwell`]: one pass more, over the rows the rules keep).
 pub(crate) fn scan_still<T: Real, S: Sample>(
     samples: &[S],
     glitches: bool,
@@ -105,7 +106,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
             rules
         },
         screen: None,
-        dwell: &Dwell::NONE,
+        dwell: T::NO_DWELL,
     };
     // The first kept sample is the origin; the loop runs over the rest.
     let mut prev = None;
@@ -128,16 +129,22 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         sum: [zero; 3],
         sum_sq: zero,
     };
+    let mut dwell = Dwell::NONE;
     if let Some(o) = origin {
-        sums = sums_about(rest, before_rest, o, &gate, gate.plain_loop());
+        // Still periods hold at least a tenth of the rows.
+        let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
+        sums = sums_about(rest, before_rest, o, &gate, Some(&mut runs));
         sums.used += 1;
+        // The still periods: their rows leave the sums.
+        if still {
+            dwell = set_aside(samples, &gate, o, &mut sums, &mut runs);
+        }
     }
-    // The still periods: their rows leave the sums (hook, issue 36).
-    let dwell = match origin {
-        Some(o) if still => set_aside(samples, &gate, o, &mut sums),
-        _ => Dwell::NONE,
-    };
     let Sums { used, sum, sum_sq } = sums;
+    let gate = Gate {
+        dwell: &dwell,
+        ..gate
+    };
     if used + dwell.rows() + drops.total() != samples.len() {
         // Non-finite rows in the plain pipeline (which counts after the
         // sums); with the glitch rules this cannot happen, as both loops
@@ -211,16 +218,16 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
     })
 }
 
-/// The still periods of the rows `gate` passes ([`dwell::detect`]), whose
-/// rows are then taken out of `sums` (about the origin `o`).
+/// The still periods of the time runs `found` among the rows `gate`
+/// passes, and `sums` (about the origin `o`) without their rows.
 #[inline(never)]
 fn set_aside<T: Real, S: Sample>(
     samples: &[S],
     gate: &Gate<T>,
     o: [T; 3],
     sums: &mut Sums<T>,
-) -> Dwell {
-    let found = dwell::detect(samples, gate);
+    runs: &mut dwell::Tracker<T>,
+) -> Dwell<T> {
     // The spread of every row kept: the RMS distance from their mean.
     let n = T::from_count(sums.used);
     let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
@@ -230,24 +237,16 @@ fn set_aside<T: Real, S: Sample>(
     } else {
         T::zero()
     };
-    let mut dwell = found.decide(spread);
-    let used = sums.used;
-    for &(s, e) in dwell.spans() {
-        let prev = s.checked_sub(1).and_then(|j| samples.get(j));
-        let part = sums_about(
-            samples.get(s..e).unwrap_or(&[]),
-            prev,
-            o,
-            gate,
-            gate.plain_loop(),
-        );
-        sums.used = sums.used.saturating_sub(part.used);
-        for (t, p) in sums.sum.iter_mut().zip(part.sum) {
-            *t -= p;
-        }
-        sums.sum_sq -= part.sum_sq;
+    let mut dwell = runs.finish(spread);
+    if !dwell.is_empty() {
+        let used = sums.used;
+        let gate = Gate {
+            dwell: &dwell,
+            ..*gate
+        };
+        *sums = sums_about(samples, None, o, &gate, None);
+        dwell.set_rows(used.saturating_sub(sums.used));
     }
-    dwell.set_rows(used.saturating_sub(sums.used));
     dwell
 }
 
@@ -259,31 +258,35 @@ struct Sums<T> {
 }
 
 /// [`Sums`] of the rows `gate` keeps about the origin `o` (`prev`: the
-/// row before `samples`): the loop of [`scan`], on scalars and on its own
-/// (not inlined), so that nothing of the caller competes for its
-/// registers. With `plain` (a plain gate, with outlier handling) each row
-/// is converted inline, else through [`Gate::pass`]: one loop for both.
-/// A copy for each (generic over a filter) took 140 bytes of flash more
-/// with `robust` (LS9 + ADC2, `bash bench.sh flash`) for 8 320
-/// instructions less on clean data (n = 1000, `bash bench.sh bench`).
+/// row before `samples`), and their time runs when `runs` is given
+/// ([`dwell::Tracker`]: the still periods' pass in the same loop): the
+/// loop of [`scan`], on scalars and on its own (not inlined), so that
+/// nothing of the caller competes for its registers. Every row goes
+/// through [`Gate::pass`], a plain gate's too: the inline conversion of
+/// a plain gate's rows took 64 bytes of flash more (LS9 + ADC2, branch
+/// `core-dwell`) for about 39 instructions a row less.
 #[inline(never)]
 fn sums_about<T: Real, S: Sample>(
     samples: &[S],
     prev: Option<&S>,
     o: [T; 3],
     gate: &Gate<T>,
-    plain: bool,
+    mut runs: Option<&mut dwell::Tracker<T>>,
 ) -> Sums<T> {
     let [o0, o1, o2] = o;
     let (mut s0, mut s1, mut s2, mut sq) = (T::zero(), T::zero(), T::zero(), T::zero());
     let mut used = 0;
     let mut last = prev;
     for s in samples {
-        let row = gate.pass_in(plain, s, last);
+        let row = gate.pass(s, last);
         last = Some(s);
-        let Some([y0, y1, y2]) = row else {
+        let Some(y) = row else {
             continue;
         };
+        if let Some(runs) = runs.as_deref_mut() {
+            runs.push(y);
+        }
+        let [y0, y1, y2] = y;
         let (d0, d1, d2) = (y0 - o0, y1 - o1, y2 - o2);
         s0 += d0;
         s1 += d1;

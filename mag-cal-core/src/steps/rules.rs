@@ -244,17 +244,16 @@ impl<T: Real> Ball<T> {
 
 /// Which rows a pass uses: the rules, the screening ball when the
 /// robust path set one, and the still periods set aside
-/// ([`crate::steps::dwell`]), which the pass's pieces skip
-/// ([`Gate::pieces`]).
+/// ([`crate::Dwell`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Gate<'d, T: Real> {
     /// The drop rules.
     pub rules: Rules<T>,
     /// Samples outside are screened out.
     pub screen: Option<Ball<T>>,
-    /// The spans of still rows set aside. By reference: gates are copied
-    /// into the methods' frames.
-    pub dwell: &'d Dwell,
+    /// Samples in a still period's ball are set aside. By reference:
+    /// gates are copied into the methods' frames.
+    pub dwell: &'d Dwell<T>,
 }
 
 impl<T: Real> Gate<'static, T> {
@@ -262,17 +261,26 @@ impl<T: Real> Gate<'static, T> {
     pub(crate) const PLAIN: Self = Self {
         rules: Rules::PLAIN,
         screen: None,
-        dwell: &Dwell::NONE,
+        dwell: T::NO_DWELL,
     };
 }
 
 impl<'d, T: Real> Gate<'d, T> {
     /// The gate of `rules`, no ball, the still periods `dwell`.
-    pub(crate) const fn of(rules: Rules<T>, dwell: &'d Dwell) -> Self {
+    pub(crate) const fn of(rules: Rules<T>, dwell: &'d Dwell<T>) -> Self {
         Self {
             rules,
             screen: None,
             dwell,
+        }
+    }
+
+    /// The gate of `rules` alone.
+    pub(crate) const fn only(rules: Rules<T>) -> Self {
+        Self {
+            rules,
+            screen: None,
+            dwell: T::NO_DWELL,
         }
     }
 
@@ -282,22 +290,6 @@ impl<'d, T: Real> Gate<'d, T> {
             && !self.rules.clipping
             && self.screen.is_none()
             && self.dwell.is_empty()
-    }
-
-    /// The pieces of `samples` outside the still periods and the spans of
-    /// `skip`, each at most `size` rows, with its first row's index and
-    /// the row before it ([`Runs::pieces`]).
-    #[inline(always)]
-    pub(crate) fn pieces<'a, S>(
-        &self,
-        skip: &'a Runs,
-        samples: &'a [S],
-        size: usize,
-    ) -> impl Iterator<Item = (usize, Option<&'a S>, &'a [S])> + 'a
-    where
-        'd: 'a,
-    {
-        skip.pieces_outside(self.dwell.spans(), samples, size)
     }
 
     /// Whether a pass over the rows the gate passes takes its plain loop
@@ -348,7 +340,7 @@ impl<'d, T: Real> Gate<'d, T> {
     }
 
     /// The components of a row the gate passes, or the rule that drops
-    /// it (`None`: outside the ball). Out of line, the one copy of the
+    /// it (`None`: outside the screening ball or in a still period's). Out of line, the one copy of the
     /// rules ([`Gate::pass`], and [`count_drops`] with clip levels or on
     /// floating-point rows: LS9 + ADC2 on a Cortex-M4F 36 592 -> 36 528
     /// bytes of flash, the plain build's 22 504 -> 22 420, `bash bench.sh
@@ -371,10 +363,18 @@ impl<'d, T: Real> Gate<'d, T> {
                 glitches: self.rules.glitches,
                 ..Rules::PLAIN
             };
-            check::<T, S>(sample, prev, &rules).map_err(Some)
+            let y = check::<T, S>(sample, prev, &rules).map_err(Some)?;
+            if self.dwell.holds(y) {
+                return Err(None);
+            }
+            Ok(y)
         }
         #[cfg(feature = "robust")]
         let y = check::<T, S>(sample, prev, &self.rules).map_err(Some)?;
+        #[cfg(feature = "robust")]
+        if self.dwell.holds(y) {
+            return Err(None);
+        }
         #[cfg(feature = "robust")]
         match &self.screen {
             Some(ball) if !ball.contains(y) => Err(None),
@@ -409,8 +409,8 @@ pub enum SampleClass {
     Dropped(Rule),
     /// The row lies too far from the others (screening).
     Screened,
-    /// The row is one of a still period's, beyond its first few: set aside
-    /// before any fit ([`crate::steps::dwell`]).
+    /// The row lies in a still period's ball: set aside before any fit
+    /// ([`crate::Dwell`]).
     Dwell,
     /// The row's radial residual under the calibration exceeds the cut,
     /// or the row lies beside a run of such rows ([`crate::robust::runs`]).
@@ -436,9 +436,9 @@ pub struct Selection<T: Real> {
     /// Rows in these spans, beside runs of rejected rows, were rejected
     /// too ([`crate::robust::runs`]).
     pub runs: Runs,
-    /// Rows in these spans, still periods beyond their first rows, were
-    /// set aside before any fit ([`SampleClass::Dwell`]).
-    pub dwell: Dwell,
+    /// Rows in these balls, still periods, were set aside before any fit
+    /// ([`SampleClass::Dwell`]).
+    pub dwell: Dwell<T>,
 }
 
 impl<T: Real> Selection<T> {
@@ -527,7 +527,7 @@ impl<T: Real> Selection<T> {
                 Ok(y) => y,
                 Err(rule) => return SampleClass::Dropped(rule),
             };
-            if dwell.contains(i) {
+            if dwell.holds(y) {
                 return SampleClass::Dwell;
             }
             if ball.is_some_and(|b| !b.contains(y)) {
@@ -633,7 +633,7 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
     // Through the gate's out-of-line check, no ball: no second copy of
     // the rules for this loop (it runs with clip levels or on
     // floating-point rows).
-    let gate = Gate::of(*rules, &Dwell::NONE);
+    let gate = Gate::only(*rules);
     for s in samples {
         if let Err(Some(rule)) = gate.admit(s, prev) {
             drops.count(rule);

@@ -89,7 +89,7 @@ impl<T: Real, S: Sample> Objective<T, PARAMS> for SubMleObjective<'_, T, S> {
         let mut cost = T::zero();
         let mut dm = Matrix3::zeros();
         let mut db = Vector3::zeros();
-        for (_, prev, block) in self.gate.pieces(&self.runs, self.samples, BLOCK) {
+        for (_, prev, block) in self.runs.pieces(self.samples, BLOCK) {
             let (mut c_blk, mut dm_blk, mut db_blk) =
                 (T::zero(), Matrix3::zeros(), Vector3::zeros());
             for y in self.gate.rows(block, prev) {
