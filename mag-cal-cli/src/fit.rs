@@ -33,8 +33,8 @@ pub struct Outcome {
     /// Rows dropped by each rule (by [`mag_cal_core::Rule::name`]).
     pub drops: DropCounts,
     /// Rows kept by the rules but set aside as still periods (a device
-    /// lying still, beyond the first rows of each: not outliers; their
-    /// spans are `selection.dwell`).
+    /// lying still: not outliers; the rows in the balls of
+    /// `selection.dwell`).
     pub dwell: usize,
     /// Rows kept by the rules but screened out (too far from the others).
     pub screened: usize,

@@ -157,8 +157,9 @@ fn outlier_handling(o: &Outcome) -> String {
 
 /// The `samples` line: every row counted once, e.g. `298 used of 300: 0
 /// dropped, 0 still, 0 screened, 2 rejected (residual beyond 0.0946 of the
-/// field)`; still rows with their spans, `1795 still (set aside: the
-/// device lay still in rows 5-599, 1305-2099)`.
+/// field)`; still rows with where the device lay, `1795 still (set aside:
+/// the device lay still within 1.2 of (40.19, -25.00, 342.1), within 1.4
+/// of (39.00, -24.50, -318.0))`.
 fn sample_counts(o: &Outcome) -> String {
     let rows = o.samples_used + o.samples_dropped + o.dwell + o.screened + o.rejected;
     let mut s = format!(
@@ -176,13 +177,22 @@ fn sample_counts(o: &Outcome) -> String {
     }
     let _ = write!(s, ", {} still", o.dwell);
     if o.dwell > 0 && !o.selection.dwell.is_empty() {
-        let mut spans = o.selection.dwell.clone();
-        spans.sort_unstable();
-        let _ = write!(
-            s,
-            " (set aside: the device lay still in rows {})",
-            rows_of(&spans)
-        );
+        let balls: Vec<String> = o
+            .selection
+            .dwell
+            .iter()
+            .map(|b| {
+                let c = b.centre.map(|v| sig(v, 4));
+                format!(
+                    "within {} of ({}, {}, {})",
+                    sig(b.radius, 2),
+                    c[0],
+                    c[1],
+                    c[2]
+                )
+            })
+            .collect();
+        let _ = write!(s, " (set aside: the device lay still {})", balls.join(", "));
     }
     let _ = write!(s, ", {} screened", o.screened);
     if let Some(screen) = o.selection.screen.filter(|_| o.screened > 0) {
@@ -459,13 +469,22 @@ mod tests {
         // Still periods: counted, with their rows in order.
         let mut still = outcome();
         still.dwell = 1795;
-        still.selection.dwell = vec![(1305, 2100), (5, 600)];
+        still.selection.dwell = vec![
+            Screen {
+                centre: [40.1875, -25.0, 342.0625],
+                radius: 1.1875,
+            },
+            Screen {
+                centre: [39.0, -24.5, -318.0],
+                radius: 1.4375,
+            },
+        ];
         let t = text(&still, "f", "c", None);
         assert!(
             t.contains(
                 "  samples       300 used of 2100: 2 dropped (1 non-finite, 1 repeated), \
-                 1795 still (set aside: the device lay still in rows 5-599, 1305-2099), \
-                 0 screened, 3 rejected"
+                 1795 still (set aside: the device lay still within 1.2 of (40.19, -25.00, \
+                 342.1), within 1.4 of (39.00, -24.50, -318.0)), 0 screened, 3 rejected"
             ),
             "{t}"
         );
@@ -473,7 +492,10 @@ mod tests {
         assert_eq!(v["dwell"], 1795);
         assert_eq!(
             v["selection"]["dwell"],
-            serde_json::json!([[1305, 2100], [5, 600]])
+            serde_json::json!([
+                {"centre": [40.1875, -25.0, 342.0625], "radius": 1.1875},
+                {"centre": [39.0, -24.5, -318.0], "radius": 1.4375}
+            ])
         );
         let mut quiet = outcome();
         quiet.quality.warnings.clear();

@@ -755,18 +755,17 @@ fn check_counts(v: &Value, plain: bool) -> Result<(), String> {
     let screen_ok = screen.is_null()
         || (screen["centre"].as_array().is_some_and(|c| c.len() == 3)
             && screen["radius"].as_f64().is_some_and(|r| r >= 0.0));
-    let spans_ok = s["dwell"].as_array().is_some_and(|spans| {
-        spans.iter().all(|p| {
-            let p: Vec<u64> = p
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(Value::as_u64)
-                .collect();
-            p.len() == 2 && p[0] < p[1]
-        })
+    // At most 3 balls (centre, non-negative radius).
+    let balls_ok = s["dwell"].as_array().is_some_and(|balls| {
+        balls.len() <= 3
+            && balls.iter().all(|b| {
+                b["centre"]
+                    .as_array()
+                    .is_some_and(|c| c.len() == 3 && c.iter().all(|x| x.as_f64().is_some()))
+                    && b["radius"].as_f64().is_some_and(|r| r >= 0.0)
+            })
     });
-    if !spans_ok || (dwell > 0 && s["dwell"].as_array().is_some_and(Vec::is_empty)) {
+    if !balls_ok || (dwell > 0 && s["dwell"].as_array().is_some_and(Vec::is_empty)) {
         return Err("selection.dwell vs dwell".into());
     }
     let limit = &s["residual_limit"];
