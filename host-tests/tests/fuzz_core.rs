@@ -627,9 +627,11 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
                     what()
                 ));
             }
-            if r.samples_used + r.samples_dropped + r.screened + r.rejected != samples.len() {
+            if r.samples_used + r.samples_dropped + r.dwell + r.screened + r.rejected
+                != samples.len()
+            {
                 return Err(format!(
-                    "used + dropped != len {}: {}",
+                    "used + dropped + dwell + screened + rejected != len {}: {}",
                     samples.len(),
                     what()
                 ));
