@@ -455,16 +455,17 @@ test('a log lying still before and after its turns shows the rows set aside as m
   assert.equal(code, 0);
   assert.ok(cli.dwell > 0, JSON.stringify(cli));
   assertSameCalibration(await shown(page), cli, 1e-9);
-  // The counts, as the CLI gives them, and the rows set aside as its text
-  // report names them.
+  // The counts, as the CLI gives them, and where the device lay still as
+  // its text report names it.
   assert.equal(
     await page.textContent('[data-name="samples"]'),
     `${cli.samples_used} used of 2100: ${cli.samples_dropped} dropped, ${cli.dwell} still, ${cli.screened} screened, ${cli.rejected} rejected`,
   );
   const report = execFileSync(MAGCAL, ['fit', file], { encoding: 'utf8' });
-  const spans = report.match(/ still \(set aside: the device lay still in rows (.*?)\)/)[1];
+  const where = report.match(/ still \(set aside: the device lay still (within .*?\))\), \d+ screened/)[1];
+  assert.equal(where.match(/within /g).length, cli.selection.dwell.length);
   const note = await page.textContent('td[data-name="samples"] + td.note');
-  assert.equal(note.replaceAll('–', '-'), `still: set aside where the device lay still (rows ${spans})`);
+  assert.equal(note, `still: set aside where the device lay still ${where}`);
   // Each row's class: the still rows drawn in their own colour.
   const classes = await page.evaluate(() => window.magcal.result.classes);
   assert.equal(classes.filter((c) => c === 'dwell').length, cli.dwell);

@@ -463,12 +463,24 @@ function show3d(doc) {
   $('send').disabled = !port;
 }
 
-// Where the rows set aside as still periods lie (a device lying still:
-// no outliers), as magcal's text report names them.
+// `v` to `n` significant digits, trailing zeros kept, as magcal's text
+// report prints them (its `sig`): fixed for exponents -5 to n - 1,
+// otherwise `1.235e4`.
+function sig(v, n) {
+  if (!Number.isFinite(v) || v === 0) return String(v);
+  const e = Number(v.toExponential(n - 1).split('e')[1]);
+  return e >= -5 && e < n ? v.toFixed(n - 1 - e) : v.toExponential(n - 1).replace('e+', 'e');
+}
+
+// Where the device lay still (a ball about each still period, sensor
+// units; its rows set aside, no outliers), as magcal's text report names
+// it.
 function stillNote(f) {
-  if (!f.dwell) return '';
-  const rows = [...f.selection.dwell].sort((a, b) => a[0] - b[0]).map(([s, e]) => `${s}–${e - 1}`);
-  return `still: set aside where the device lay still (rows ${rows.join(', ')})`;
+  if (!f.dwell || !f.selection.dwell.length) return '';
+  const balls = f.selection.dwell.map(
+    ({ centre, radius }) => `within ${sig(radius, 2)} of (${centre.map((v) => sig(v, 4)).join(', ')})`,
+  );
+  return `still: set aside where the device lay still ${balls.join(', ')}`;
 }
 
 const vector = (prefix, v) =>
