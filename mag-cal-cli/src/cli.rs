@@ -63,9 +63,9 @@ norm is off the unit sphere by more than 3.5 robust standard deviations are
 rejected.
 
 Still periods (with or without --plain): where the device lay still (a log
-that starts or ends on the desk), the rows beyond the first few of each
-still period are set aside before any fit, so that the log calibrates like
-its motion alone; they are no outliers. Too few rows left in motion is
+that starts or ends on the desk), every row within a ball about the still
+position (a few noise sigmas) is set aside before any fit, so that the log
+calibrates like its motion alone; they are no outliers. Too few rows left in motion is
 refused: the device hardly moved.
 
 The report counts every row once (used + dropped + still + screened +

@@ -231,7 +231,7 @@ int main(int argc, char **argv) {
         failed = 1;
 
     /* Still periods: the log lying still before and after its turns. The
-     * rows beyond the first few of each are set aside (no outliers), and
+     * rows in a ball about each still position are set aside (no outliers), and
      * every row is counted once (a result of its own: `r` holds the log's
      * calibration, checked below). */
     MagcalResult e;

@@ -287,8 +287,8 @@ typedef struct {
   uint32_t samples_used;
   // Rows dropped by rule (non-finite, zero, rails, repeated, clipped).
   uint32_t samples_dropped;
-  // Rows set aside as still periods (a device lying still, beyond the
-  // first rows of each): not outliers. `samples_used + samples_dropped
+  // Rows set aside as still periods (those in a ball about where a
+  // device lay still): not outliers. `samples_used + samples_dropped
   // + dwell + screened + rejected` is the number of samples.
   uint32_t dwell;
   // Rows screened out (far from the others).

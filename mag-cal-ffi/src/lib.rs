@@ -904,8 +904,8 @@ pub struct MagcalResult {
     pub samples_used: u32,
     /// Rows dropped by rule (non-finite, zero, rails, repeated, clipped).
     pub samples_dropped: u32,
-    /// Rows set aside as still periods (a device lying still, beyond the
-    /// first rows of each): not outliers. `samples_used + samples_dropped
+    /// Rows set aside as still periods (those in a ball about where a
+    /// device lay still): not outliers. `samples_used + samples_dropped
     /// + dwell + screened + rejected` is the number of samples.
     pub dwell: u32,
     /// Rows screened out (far from the others).
