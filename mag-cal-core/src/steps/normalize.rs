@@ -135,28 +135,40 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
         sums = sums_about(rest, before_rest, o, &gate, Some(&mut runs));
         sums.used += 1;
-        // The still periods: their rows leave the sums.
         if still {
-            dwell = set_aside(samples, &gate, o, &mut sums, &mut runs);
+            // The spread of every row kept: the RMS distance from their
+            // mean (the guard of `Tracker::finish`).
+            let n = T::from_count(sums.used);
+            let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
+            let var =
+                sums.sum_sq / n - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+            dwell = runs.finish(if var > zero { var.square_root() } else { zero });
         }
     }
-    let Sums { used, sum, sum_sq } = sums;
+    // The still periods' rows leave the sums: a second pass, when there
+    // are any.
+    let kept = sums.used;
     let gate = Gate {
         dwell: &dwell,
         ..gate
     };
-    if used + dwell.rows() + drops.total() != samples.len() {
+    if let Some(o) = origin.filter(|_| !dwell.is_empty()) {
+        sums = sums_about(samples, None, o, &gate, None);
+    }
+    let aside = kept - sums.used;
+    let Sums { used, sum, sum_sq } = sums;
+    if used + aside + drops.total() != samples.len() {
         // Non-finite rows in the plain pipeline (which counts after the
         // sums); with the glitch rules this cannot happen, as both loops
         // apply the same rules.
         drops = count_drops::<T, S>(samples, &gate.rules);
     }
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
-        if dwell.rows() > 0 {
+        if aside > 0 {
             // Too few rows left beside the still periods.
             return Err(Error::HardlyMoved {
                 moving: used,
-                still: dwell.rows(),
+                still: aside,
                 required: MIN_SAMPLES,
             });
         }
@@ -200,6 +212,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         return Err(Error::OutOfRange);
     }
     let scale = var.square_root();
+    dwell.set_rows(aside);
     Ok(Scan {
         norm: Normalization {
             centre,
@@ -216,38 +229,6 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         },
         dwell,
     })
-}
-
-/// The still periods of the time runs `found` among the rows `gate`
-/// passes, and `sums` (about the origin `o`) without their rows.
-#[inline(never)]
-fn set_aside<T: Real, S: Sample>(
-    samples: &[S],
-    gate: &Gate<T>,
-    o: [T; 3],
-    sums: &mut Sums<T>,
-    runs: &mut dwell::Tracker<T>,
-) -> Dwell<T> {
-    // The spread of every row kept: the RMS distance from their mean.
-    let n = T::from_count(sums.used);
-    let mean = [sums.sum[0] / n, sums.sum[1] / n, sums.sum[2] / n];
-    let var = sums.sum_sq / n - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
-    let spread = if var > T::zero() {
-        var.square_root()
-    } else {
-        T::zero()
-    };
-    let mut dwell = runs.finish(spread);
-    if !dwell.is_empty() {
-        let used = sums.used;
-        let gate = Gate {
-            dwell: &dwell,
-            ..*gate
-        };
-        *sums = sums_about(samples, None, o, &gate, None);
-        dwell.set_rows(used.saturating_sub(sums.used));
-    }
-    dwell
 }
 
 /// Count, `sum (y - o)` and `sum |y - o|^2` over the kept samples.
