@@ -249,6 +249,8 @@ pub struct GlitchLog {
     pub screened: [u32; 2],
     /// Dropped by a drop rule of the core.
     pub dropped: [u32; 2],
+    /// Set aside as a still period's (the core's still rule).
+    pub dwell: [u32; 2],
     /// In collections whose calibration the core refused.
     pub refused: [u32; 2],
 }
@@ -260,7 +262,7 @@ impl GlitchLog {
     pub fn log_summary(&self, injected: [u32; 2]) {
         let (c, u) = (self.collected, self.used);
         info!(
-            "glitches: injected {=u32} wild + {=u32} displaced, dropped as wild {=u32} + {=u32}, seen as disturbances {=u32} + {=u32}, collected {=u32} + {=u32}, used by the fit {=u32}/{=u32} wild + {=u32}/{=u32} displaced (rejected {=u32} + {=u32}, screened {=u32} + {=u32}, dropped {=u32} + {=u32}, in refused fits {=u32} + {=u32})",
+            "glitches: injected {=u32} wild + {=u32} displaced, dropped as wild {=u32} + {=u32}, seen as disturbances {=u32} + {=u32}, collected {=u32} + {=u32}, used by the fit {=u32}/{=u32} wild + {=u32}/{=u32} displaced (rejected {=u32} + {=u32}, screened {=u32} + {=u32}, dropped {=u32} + {=u32}, still {=u32} + {=u32}, in refused fits {=u32} + {=u32})",
             injected[0],
             injected[1],
             self.wild_dropped[0],
@@ -279,6 +281,8 @@ impl GlitchLog {
             self.screened[1],
             self.dropped[0],
             self.dropped[1],
+            self.dwell[0],
+            self.dwell[1],
             self.refused[0],
             self.refused[1]
         );

@@ -27,8 +27,9 @@
 //!    - stop [`TOP_UP`] readings after the collector is ready, or when it
 //!      is full (see below);
 //!    - calibrate (ADC2, `f32`), log the calibration, its quality figures,
-//!      what the core's outlier handling did (drops by rule, screened,
-//!      rejected, used, robust passes, fit error, lack of fit) and
+//!      what the core's outlier handling did (drops by rule, still rows
+//!      set aside, screened, rejected, used, robust passes, fit error,
+//!      lack of fit) and
 //!      warnings; a refusal (or a fit with a sample it used far off its
 //!      sphere, [`MAX_RESIDUAL`]) clears the collector and starts again, at
 //!      most [`COLLECT_ATTEMPTS`] times;
@@ -703,6 +704,7 @@ fn classify_samples(
             SampleClass::Rejected => &mut this.rejected,
             SampleClass::Screened => &mut this.screened,
             SampleClass::Dropped(_) => &mut this.dropped,
+            SampleClass::Dwell => &mut this.dwell,
         };
         count[i] += 1;
     }
@@ -713,17 +715,19 @@ fn classify_samples(
     let c = this.collected;
     if c != [0, 0] {
         info!(
-            "  glitches collected: {=u32} wild ({=u32} used, {=u32} rejected, {=u32} screened, {=u32} dropped), {=u32} displaced ({=u32} used, {=u32} rejected, {=u32} screened, {=u32} dropped); largest residual of a glitch used {=f32}",
+            "  glitches collected: {=u32} wild ({=u32} used, {=u32} rejected, {=u32} screened, {=u32} dropped, {=u32} still), {=u32} displaced ({=u32} used, {=u32} rejected, {=u32} screened, {=u32} dropped, {=u32} still); largest residual of a glitch used {=f32}",
             c[0],
             this.used[0],
             this.rejected[0],
             this.screened[0],
             this.dropped[0],
+            this.dwell[0],
             c[1],
             this.used[1],
             this.rejected[1],
             this.screened[1],
             this.dropped[1],
+            this.dwell[1],
             worst_glitch_used
         );
     }
@@ -732,6 +736,7 @@ fn classify_samples(
         (&mut log.rejected, this.rejected),
         (&mut log.screened, this.screened),
         (&mut log.dropped, this.dropped),
+        (&mut log.dwell, this.dwell),
     ] {
         total[0] += n[0];
         total[1] += n[1];
@@ -767,7 +772,7 @@ fn log_fit(fit: &Fit<f32>) {
     );
     let d = &r.drops;
     info!(
-        "  outliers: {=usize} used, {=usize} dropped (non-finite {=usize}, overflow {=usize}, zero {=usize}, rails {=usize}, repeated {=usize}, clipped {=usize}), {=usize} screened, {=usize} rejected; {=u32} robust passes",
+        "  outliers: {=usize} used, {=usize} dropped (non-finite {=usize}, overflow {=usize}, zero {=usize}, rails {=usize}, repeated {=usize}, clipped {=usize}), {=usize} still (set aside), {=usize} screened, {=usize} rejected; {=u32} robust passes",
         r.samples_used,
         r.samples_dropped,
         d.non_finite,
@@ -776,6 +781,7 @@ fn log_fit(fit: &Fit<f32>) {
         d.rails,
         d.repeated,
         d.clipped,
+        r.dwell,
         r.screened,
         r.rejected,
         r.robust_passes

@@ -631,7 +631,7 @@ fn check_calibrate<T: Real, S: Sample + std::fmt::Debug>(
                 != samples.len()
             {
                 return Err(format!(
-                    "used + dropped != len {}: {}",
+                    "used + dropped + dwell + screened + rejected != len {}: {}",
                     samples.len(),
                     what()
                 ));

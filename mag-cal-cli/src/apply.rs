@@ -147,7 +147,8 @@ impl RowFlags {
     }
 
     /// The class of every row, computed as the fit did: the core's
-    /// [`mag_cal_core::Selection::classify`] in the fit's precision.
+    /// [`mag_cal_core::Selection::classify`] in the fit's precision, with
+    /// the still periods ([`SelectionJson::classify`]).
     fn classify(&self, samples: &[[f64; 3]], name: &str) -> Result<Vec<SampleClass>, CliError> {
         match self.precision {
             Precision::F32 => self.classify_in::<f32>(samples, name),
@@ -169,11 +170,10 @@ impl RowFlags {
                 self.precision.name()
             ))
         })?;
-        let selection = self.selection.to_core::<T>();
         // The rows as the fit would read them (integer counts as i16).
         Ok(match crate::fit::counts(samples) {
-            Some(ints) => selection.classify(&cal, &ints).collect(),
-            None => selection.classify(&cal, samples).collect(),
+            Some(ints) => self.selection.classify(&cal, &ints),
+            None => self.selection.classify(&cal, samples),
         })
     }
 }

@@ -60,7 +60,15 @@ deviations, their RMS at most 1.25 of them, no systematic misfit);
 otherwise rows farther than 2.5 median distances from the median centre are
 screened out, and rows whose calibrated
 norm is off the unit sphere by more than 3.5 robust standard deviations are
-rejected. The report counts every row once (used + dropped + screened +
+rejected.
+
+Still periods (with or without --plain): where the device lay still (a log
+that starts or ends on the desk), every row within a ball about the still
+position (a few noise sigmas) is set aside before any fit, so that the log
+calibrates like its motion alone; they are no outliers. Too few rows left in motion is
+refused: the device hardly moved.
+
+The report counts every row once (used + dropped + still + screened +
 rejected = rows); the JSON's 'selection' lets 'magcal apply --flags' mark them.
 
 Exit status: 0 success, 2 usage, I/O or parse error, 3 calibration refused.";
@@ -171,8 +179,9 @@ accelerometer's axes: for headings the two sensors must share right-handed
 axes. Rows with non-finite values give 'nan' coordinates and an empty heading.
 
 --flags adds two last columns: used (1 or 0) and class (used, dropped:RULE with
-RULE one of non_finite, overflow, zero, rails, repeated, clipped; screened;
-rejected), what the fit did with each row by the rules and limits of CAL.json's
+RULE one of non_finite, overflow, zero, rails, repeated, clipped; dwell, a
+still period's row set aside; screened; rejected), what the fit did with each
+row by the rules, still periods and limits of CAL.json's
 'selection' applied to FILE, in the fit's precision. For the file that was
 fitted, exactly samples_used rows are marked used (up to rounding at the
 limit). A CAL.json without 'selection' (written before outlier handling)
@@ -430,8 +439,8 @@ pub struct ApplyArgs {
     #[arg(long)]
     pub scaled: bool,
 
-    /// Add the columns used (1/0) and class (used, dropped:RULE, screened,
-    /// rejected): what the fit did with each row
+    /// Add the columns used (1/0) and class (used, dropped:RULE, dwell,
+    /// screened, rejected): what the fit did with each row
     #[arg(long)]
     pub flags: bool,
 }

@@ -32,6 +32,10 @@ pub struct Outcome {
     pub samples_dropped: usize,
     /// Rows dropped by each rule (by [`mag_cal_core::Rule::name`]).
     pub drops: DropCounts,
+    /// Rows kept by the rules but set aside as still periods (a device
+    /// lying still: not outliers; the rows in the balls of
+    /// `selection.dwell`).
+    pub dwell: usize,
     /// Rows kept by the rules but screened out (too far from the others).
     pub screened: usize,
     /// Rows inside the screening rejected by their radial residual, or
@@ -319,6 +323,7 @@ fn fit_in<T: Real>(
         samples_used: report.samples_used,
         samples_dropped: report.samples_dropped,
         drops: DropCounts(report.drops),
+        dwell: report.dwell,
         screened: report.screened,
         rejected: report.rejected,
         beside_runs: report.beside_runs,

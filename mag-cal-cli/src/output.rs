@@ -156,9 +156,12 @@ fn outlier_handling(o: &Outcome) -> String {
 }
 
 /// The `samples` line: every row counted once, e.g. `298 used of 300: 0
-/// dropped, 0 screened, 2 rejected (residual beyond 0.0946 of the field)`.
+/// dropped, 0 still, 0 screened, 2 rejected (residual beyond 0.0946 of the
+/// field)`; still rows with where the device lay, `1795 still (set aside:
+/// the device lay still within 1.2 of (40.19, -25.00, 342.1), within 1.4
+/// of (39.00, -24.50, -318.0))`.
 fn sample_counts(o: &Outcome) -> String {
-    let rows = o.samples_used + o.samples_dropped + o.screened + o.rejected;
+    let rows = o.samples_used + o.samples_dropped + o.dwell + o.screened + o.rejected;
     let mut s = format!(
         "{} used of {rows}: {} dropped",
         o.samples_used, o.samples_dropped
@@ -172,6 +175,25 @@ fn sample_counts(o: &Outcome) -> String {
             .collect();
         let _ = write!(s, " ({})", rules.join(", "));
     }
+    let _ = write!(s, ", {} still", o.dwell);
+    if o.dwell > 0 && !o.selection.dwell.is_empty() {
+        let balls: Vec<String> = o
+            .selection
+            .dwell
+            .iter()
+            .map(|b| {
+                let c = b.centre.map(|v| sig(v, 4));
+                format!(
+                    "within {} of ({}, {}, {})",
+                    sig(b.radius, 2),
+                    c[0],
+                    c[1],
+                    c[2]
+                )
+            })
+            .collect();
+        let _ = write!(s, " (set aside: the device lay still {})", balls.join(", "));
+    }
     let _ = write!(s, ", {} screened", o.screened);
     if let Some(screen) = o.selection.screen.filter(|_| o.screened > 0) {
         let _ = write!(
@@ -183,24 +205,27 @@ fn sample_counts(o: &Outcome) -> String {
     let _ = write!(s, ", {} rejected", o.rejected);
     if let Some(limit) = o.selection.residual_limit.filter(|_| o.rejected > 0) {
         let _ = write!(s, " (residual beyond {} of the field", sig(limit, 3));
-        let spans: Vec<String> = o
-            .selection
-            .runs
-            .spans()
-            .iter()
-            .map(|&(start, end)| format!("{start}-{}", end - 1))
-            .collect();
+        let spans = o.selection.runs.spans();
         if !spans.is_empty() {
             let _ = write!(
                 s,
                 ", or beside a run of such rows: {}; {} of them within the cut",
-                spans.join(", "),
+                rows_of(spans),
                 o.beside_runs
             );
         }
         s.push(')');
     }
     s
+}
+
+/// Half-open spans of rows as `first-last` ranges: `5-599, 1305-2099`.
+fn rows_of(spans: &[(usize, usize)]) -> String {
+    spans
+        .iter()
+        .map(|&(start, end)| format!("{start}-{}", end.saturating_sub(1)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Rows of numbers in brackets, right-aligned, with one number of decimals
@@ -299,6 +324,7 @@ mod tests {
                 drops.repeated = 1;
                 drops
             }),
+            dwell: 0,
             screened: 0,
             rejected: 3,
             beside_runs: 0,
@@ -363,9 +389,14 @@ mod tests {
         assert_eq!(v["drops"]["repeated"].as_u64(), Some(1));
         assert_eq!(v["drops"].as_object().map(|d| d.len()), Some(6));
         assert_eq!(
-            (v["screened"].as_u64(), v["rejected"].as_u64()),
-            (Some(0), Some(3))
+            (
+                v["dwell"].as_u64(),
+                v["screened"].as_u64(),
+                v["rejected"].as_u64()
+            ),
+            (Some(0), Some(0), Some(3))
         );
+        assert_eq!(v["selection"]["dwell"], serde_json::json!([]));
         assert_eq!(v["robust_passes"].as_u64(), Some(2));
         assert_eq!(v["robust"], true);
         assert_eq!(v["quality"]["fit_error"].as_f64(), Some(0.023_78));
@@ -407,7 +438,7 @@ mod tests {
         assert!(
             t.contains(
                 "  samples       300 used of 305: 2 dropped (1 non-finite, 1 repeated), \
-                 0 screened, 3 rejected (residual beyond 0.0946 of the field)\n"
+                 0 still, 0 screened, 3 rejected (residual beyond 0.0946 of the field)\n"
             ),
             "{t}"
         );
@@ -430,10 +461,41 @@ mod tests {
         assert!(t.contains("  outliers      off (--plain"), "{t}");
         assert!(
             t.contains(
-                "  samples       300 used of 304: 0 dropped, 4 screened (farther than 812.3 \
-                 from the median centre), 0 rejected\n"
+                "  samples       300 used of 304: 0 dropped, 0 still, 4 screened (farther \
+                 than 812.3 from the median centre), 0 rejected\n"
             ),
             "{t}"
+        );
+        // Still periods: counted, with their rows in order.
+        let mut still = outcome();
+        still.dwell = 1795;
+        still.selection.dwell = vec![
+            Screen {
+                centre: [40.1875, -25.0, 342.0625],
+                radius: 1.1875,
+            },
+            Screen {
+                centre: [39.0, -24.5, -318.0],
+                radius: 1.4375,
+            },
+        ];
+        let t = text(&still, "f", "c", None);
+        assert!(
+            t.contains(
+                "  samples       300 used of 2100: 2 dropped (1 non-finite, 1 repeated), \
+                 1795 still (set aside: the device lay still within 1.2 of (40.19, -25.00, \
+                 342.1), within 1.4 of (39.00, -24.50, -318.0)), 0 screened, 3 rejected"
+            ),
+            "{t}"
+        );
+        let v: serde_json::Value = serde_json::from_str(&json(&still)).expect("valid JSON");
+        assert_eq!(v["dwell"], 1795);
+        assert_eq!(
+            v["selection"]["dwell"],
+            serde_json::json!([
+                {"centre": [40.1875, -25.0, 342.0625], "radius": 1.1875},
+                {"centre": [39.0, -24.5, -318.0], "radius": 1.4375}
+            ])
         );
         let mut quiet = outcome();
         quiet.quality.warnings.clear();

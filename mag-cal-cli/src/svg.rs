@@ -8,11 +8,13 @@
 //! paper's Fig. 2, the per-sample norms `|y - b| / rho` and `|W (y - b)|`
 //! against the sample index with the unit line. Rows the fit did not use
 //! are red crosses at their calibrated position: `x` rejected by their
-//! residual, `+` screened out (drawn on the frame when they lie beyond it).
-//! Rows dropped by the rules (non-finite, overflowing, glitches) are not
-//! drawn; the subtitle counts every class. Long inputs are thinned to one
-//! used sample in k, and more than [`MAX_CROSSES`] outliers to one in j
-//! (the subtitle says so). The output
+//! residual, `+` screened out (drawn on the frame when they lie beyond it);
+//! rows set aside as still periods (a device lying still: no outliers) are
+//! green rings at their calibrated position. Rows dropped by the rules
+//! (non-finite, overflowing, glitches) are not drawn; the subtitle counts
+//! every class. Long inputs are thinned to one used sample in k, more than
+//! [`MAX_CROSSES`] outliers to one in j, and as many still rows to one in
+//! m (the subtitle says so). The output
 //! depends on the inputs only (no timestamps), and every coordinate is
 //! finite.
 
@@ -45,6 +47,8 @@ const HEIGHT: f64 = 820.0;
 const RAW: &str = "#1f77b4";
 const CAL: &str = "#ff7f0e";
 const OUT: &str = "#d62728";
+/// Rows set aside as still periods.
+const STILL: &str = "#2ca02c";
 const REF: &str = "#333";
 /// Most points drawn per series; longer inputs are thinned by a stride.
 const MAX_POINTS: usize = 3000;
@@ -62,7 +66,7 @@ const TICK_X: &str = r#"text-anchor="middle" font-size="11""#;
 const TICK_Y: &str = r#"text-anchor="end" font-size="11""#;
 
 /// A drawn sample: input row, `y - b`, `rho W (y - b)`, what the fit did
-/// with it (used, screened or rejected).
+/// with it (used, still, screened or rejected).
 type Drawn = (usize, [f64; 3], [f64; 3], SampleClass);
 
 /// A rectangle of the canvas mapping data ranges onto it (y up).
@@ -112,6 +116,7 @@ impl Area {
 struct Counts {
     used: usize,
     dropped: usize,
+    dwell: usize,
     screened: usize,
     rejected: usize,
 }
@@ -122,9 +127,8 @@ impl Counts {
         for class in classes {
             match class {
                 SampleClass::Used => c.used += 1,
-                // Still rows set aside are not drawn yet (issue 36's front
-                // ends): counted with the dropped ones.
-                SampleClass::Dropped(_) | SampleClass::Dwell => c.dropped += 1,
+                SampleClass::Dropped(_) => c.dropped += 1,
+                SampleClass::Dwell => c.dwell += 1,
                 SampleClass::Screened => c.screened += 1,
                 SampleClass::Rejected => c.rejected += 1,
             }
@@ -151,21 +155,20 @@ pub fn plot(
     let cross_stride = (counts.screened + counts.rejected)
         .div_ceil(MAX_CROSSES)
         .max(1);
-    let shown = |class: SampleClass| !matches!(class, SampleClass::Dropped(_));
-    let used = samples
-        .iter()
-        .zip(classes)
-        .enumerate()
+    let still_stride = counts.dwell.div_ceil(MAX_CROSSES).max(1);
+    let rows = || samples.iter().zip(classes).enumerate();
+    let used = rows()
         .filter(|(_, (_, c))| **c == SampleClass::Used)
         .step_by(stride);
-    let outliers = samples
-        .iter()
-        .zip(classes)
-        .enumerate()
-        .filter(|(_, (_, c))| shown(**c) && **c != SampleClass::Used)
+    let outliers = rows()
+        .filter(|(_, (_, c))| matches!(c, SampleClass::Screened | SampleClass::Rejected))
         .step_by(cross_stride);
+    let still = rows()
+        .filter(|(_, (_, c))| **c == SampleClass::Dwell)
+        .step_by(still_stride);
     let mut drawn: Vec<Drawn> = used
         .chain(outliers)
+        .chain(still)
         .map(|(i, (y, class))| {
             let c = cal.apply_scaled_vector(*y);
             (
@@ -196,11 +199,12 @@ pub fn plot(
     }
     text(&mut s, WIDTH / 2.0, 30.0, TITLE, &heading);
     let mut sub = format!(
-        "{} rows: {} used, {} dropped, {} screened, {} rejected; \
+        "{} rows: {} used, {} dropped, {} still, {} screened, {} rejected; \
          field strength \u{3c1} = {}, hard iron b = [{}, {}, {}]",
         samples.len(),
         counts.used,
         counts.dropped,
+        counts.dwell,
         counts.screened,
         counts.rejected,
         sig(rho, 4),
@@ -213,6 +217,9 @@ pub fn plot(
     }
     if cross_stride > 1 {
         let _ = write!(sub, ", 1 in {cross_stride} outliers");
+    }
+    if still_stride > 1 {
+        let _ = write!(sub, ", 1 in {still_stride} still rows");
     }
     text(&mut s, WIDTH / 2.0, 52.0, SUBTITLE, &sub);
     let rejected = match title.residual_limit {
@@ -240,6 +247,10 @@ pub fn plot(
     }
     if counts.screened > 0 {
         entries.push((OUT, Mark::Plus, screened));
+    }
+    if counts.dwell > 0 {
+        let still = format!("still, set aside ({})", counts.dwell);
+        entries.push((STILL, Mark::Ring, still));
     }
     entries.push((REF, Mark::Dash, "circle of radius \u{3c1}".to_owned()));
     legend(
@@ -303,6 +314,7 @@ fn projection(s: &mut String, area: &Area, drawn: &[Drawn], (i, j): (usize, usiz
     s.push_str("</g>\n");
     // Outside the clip: an outlier beyond the frame sits on it.
     crosses(s, drawn, |(_, _, c, _)| area.inside(c[i], c[j]));
+    rings(s, drawn, |(_, _, c, _)| area.inside(c[i], c[j]));
     s.push_str("</g>\n");
 }
 
@@ -340,6 +352,30 @@ fn crosses(s: &mut String, drawn: &[Drawn], place: impl Fn(&Drawn) -> Option<(f6
     }
 }
 
+/// The rows of `drawn` set aside as still periods, as green rings at
+/// `place`.
+fn rings(s: &mut String, drawn: &[Drawn], place: impl Fn(&Drawn) -> Option<(f64, f64)>) {
+    let points: Vec<(f64, f64)> = drawn
+        .iter()
+        .filter(|d| d.3 == SampleClass::Dwell)
+        .filter_map(place)
+        .collect();
+    if points.is_empty() {
+        return;
+    }
+    let _ = write!(
+        s,
+        r#"<path class="dwell" fill="none" stroke="{STILL}" stroke-width="1.2" d=""#
+    );
+    for (x, y) in points {
+        let _ = write!(s, "M{:.1} {y:.1}{RING}", x - 3.5);
+    }
+    s.push_str("\"/>\n");
+}
+
+/// A ring of radius 3.5 from its leftmost point (path commands).
+const RING: &str = "a3.5 3.5 0 1 0 7 0a3.5 3.5 0 1 0 -7 0";
+
 /// The paper's Fig. 2: norms against the sample index, with the unit line.
 fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
     let norm = |v: [f64; 3]| v[0].hypot(v[1]).hypot(v[2]) / rho;
@@ -348,13 +384,14 @@ fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
         .map(|&(i, r, c, class)| (i, norm(r), norm(c), class))
         .filter(|(_, r, c, _)| r.is_finite() && c.is_finite())
         .collect();
-    // The range of the rows used and of the rejected rows' calibrated
-    // norms (screened rows may lie far off: they sit on the frame).
+    // The range of the rows used and of the rejected and still rows'
+    // calibrated norms (screened rows may lie far off: they sit on the
+    // frame).
     let (lo, hi) = norms
         .iter()
         .flat_map(|&(_, r, c, class)| match class {
             SampleClass::Used => [Some(r), Some(c)],
-            SampleClass::Rejected => [Some(c), None],
+            SampleClass::Rejected | SampleClass::Dwell => [Some(c), None],
             _ => [None, None],
         })
         .flatten()
@@ -397,6 +434,7 @@ fn norms(s: &mut String, drawn: &[Drawn], rows: usize, rho: f64) {
     s.push_str("</g>\n");
     let calibrated_norm = |&(i, _, c, _): &Drawn| area.inside(i as f64, norm(c));
     crosses(s, drawn, calibrated_norm);
+    rings(s, drawn, calibrated_norm);
     s.push_str("</g>\n");
 }
 
@@ -463,6 +501,8 @@ enum Mark {
     Cross,
     /// `+`, a screened row.
     Plus,
+    /// `o`, a row set aside as a still period's.
+    Ring,
 }
 
 /// A legend entry: colour, mark, label.
@@ -511,6 +551,11 @@ fn legend(s: &mut String, mut x: f64, y: f64, entries: &[Entry]) {
                 r#"<path fill="none" stroke="{colour}" stroke-width="1.6" stroke-linecap="round" d="M{:.1} {my:.1}h10M{mx:.1} {:.1}v10"/>"#,
                 mx - 5.0,
                 my - 5.0
+            ),
+            Mark::Ring => writeln!(
+                s,
+                r#"<path fill="none" stroke="{colour}" stroke-width="1.2" d="M{:.1} {my:.1}{RING}"/>"#,
+                mx - 3.5
             ),
         };
         text(s, x + 28.0, y, "", label);
@@ -627,6 +672,9 @@ mod tests {
             SampleClass::Screened,
             SampleClass::Rejected,
         ]);
+        // A still period at the end: one reading, set aside 3 times.
+        samples.extend([[60.0, 0.0, 0.0]; 3]);
+        classes.extend([SampleClass::Dwell; 3]);
         let title = PlotTitle {
             source: "<a&b>.csv",
             method: "adc2",
@@ -643,14 +691,26 @@ mod tests {
         assert!(svg.contains("&lt;a&amp;b&gt;.csv"));
         assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
         assert!(
-            svg.contains("53 rows: 50 used, 1 dropped, 1 screened, 1 rejected;"),
+            svg.contains("56 rows: 50 used, 1 dropped, 3 still, 1 screened, 1 rejected;"),
             "{svg}"
         );
         assert!(svg.contains("rejected (1): |W (y \u{2212} b)| off 1 by &gt; 0.0500"));
         assert!(svg.contains("screened out (1; beyond the frame: on its edge)"));
-        // One cross per outlier in each of the four panels.
+        assert!(svg.contains(">still, set aside (3)</text>"), "{svg}");
+        // One cross per outlier in each of the four panels, and one ring
+        // per still row.
         assert_eq!(svg.matches("<path class=\"rejected\"").count(), 4);
         assert_eq!(svg.matches("<path class=\"screened\"").count(), 4);
+        let rings: Vec<&str> = svg
+            .split("<path class=\"dwell\"")
+            .skip(1)
+            .map(|p| p.split("/>").next().unwrap_or_default())
+            .collect();
+        assert_eq!(rings.len(), 4, "{svg}");
+        assert!(
+            rings.iter().all(|p| p.matches(RING).count() == 3),
+            "{rings:?}"
+        );
         assert_eq!(svg, plot(&samples, &classes, &cal, &title), "deterministic");
 
         // A clean plain fit: no crosses, no cross legend.
@@ -662,6 +722,7 @@ mod tests {
         };
         let svg = plot(&samples[..50], &used, &cal, &plain);
         assert!(!svg.contains("rejected (") && !svg.contains("screened out"));
+        assert!(!svg.contains("still, set aside") && !svg.contains("class=\"dwell\""));
         assert!(svg.contains("--plain") && svg.contains("50 rows: 50 used, 0 dropped"));
     }
 }

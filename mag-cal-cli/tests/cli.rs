@@ -24,14 +24,22 @@ fn counts(v: &Value) -> [u64; 4] {
         .map(|key| v[key].as_u64().unwrap_or_else(|| panic!("{key} in {v}")))
 }
 
+/// The rows a fit JSON set aside as still periods (`dwell`).
+fn still(v: &Value) -> u64 {
+    v["dwell"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("dwell in {v}"))
+}
+
 /// Asserts that a fit JSON accounts for each of `rows` input rows once,
 /// that its per-rule drops add up to `samples_dropped`, that the outlier
 /// share is the screened and rejected rows' share of those the rules kept
-/// (less the rows beside runs within the cut), and that the warnings say
-/// so.
+/// beside the still periods (less the rows beside runs within the cut),
+/// and that the warnings say so.
 fn assert_accounts_for(v: &Value, rows: u64) {
     let [used, dropped, screened, rejected] = counts(v);
-    assert_eq!(used + dropped + screened + rejected, rows, "{v}");
+    let dwell = still(v);
+    assert_eq!(used + dropped + dwell + screened + rejected, rows, "{v}");
     let drops = v["drops"].as_object().expect("drops object");
     // (serde_json's map here sorts its keys; the output keeps RULES order.)
     let mut names: Vec<&str> = drops.keys().map(String::as_str).collect();
@@ -44,7 +52,7 @@ fn assert_accounts_for(v: &Value, rows: u64) {
     let share = v["quality"]["outlier_share"]
         .as_f64()
         .expect("outlier_share");
-    let kept = (rows - dropped) as f64;
+    let kept = (rows - dropped - dwell) as f64;
     let beside = v["beside_runs"].as_u64().expect("beside_runs");
     assert!(beside <= rejected, "{v}");
     assert!(
@@ -178,12 +186,18 @@ fn columns_pick_named_fields() {
     // before (rows 1050 and 1051 both read -281,-315,390), none is
     // screened, and outlier handling rejects a few by their residual (93,
     // 7.4 %, as iterated ADC2 does; 54 before the robust refits ran on a
-    // subsample, with a larger radial RMS: 0.0184 against 0.0118).
+    // subsample, with a larger radial RMS: 0.0184 against 0.0118). The
+    // recording starts lying still (its gyroscope columns read noise until
+    // row 72), too short a still period to be set aside (a run must hold a
+    // tenth of the rows, the core's DWELL_SHARE; core-dwell ba7f60a: this
+    // recording's 62 rows set aside -> 0).
     assert_accounts_for(&v, 1252);
     assert_eq!(v["drops"]["repeated"], 1);
     let [used, dropped, screened, rejected] = counts(&v);
     assert_eq!((dropped, screened), (1, 0));
     assert!(rejected > 0 && rejected * 100 <= 1252 * 8, "{rejected}");
+    assert_eq!(still(&v), 0, "{v}");
+    assert_eq!(v["selection"]["dwell"], serde_json::json!([]));
     assert_eq!(used + rejected, 1251);
     // Raw counts of a few hundred: the accelerometer columns would give a
     // field strength near 9.8.
@@ -206,7 +220,8 @@ fn stdin_and_text_format() {
         "adc2",
         "ls9",
         "f64",
-        "\n  samples       298 used of 300: 0 dropped, 0 screened, 2 rejected (residual beyond ",
+        "\n  samples       298 used of 300: 0 dropped, 0 still, 0 screened, 2 rejected (residual \
+         beyond ",
         "\n  outliers      on, ",
         "radial RMS",
         "norm spread",
@@ -652,7 +667,7 @@ fn hostile_input_never_panics() {
 }
 
 /// The top-level fields of `magcal fit --format json`.
-const FIT_KEYS: [&str; 18] = [
+const FIT_KEYS: [&str; 19] = [
     "method",
     "ls",
     "precision",
@@ -660,6 +675,7 @@ const FIT_KEYS: [&str; 18] = [
     "samples_used",
     "samples_dropped",
     "drops",
+    "dwell",
     "screened",
     "rejected",
     "hard_iron",
@@ -804,9 +820,9 @@ fn text_format_shows_passes_and_warnings() {
         plain.stdout
     );
     assert!(
-        plain
-            .stdout
-            .contains("\n  samples       300 used of 300: 0 dropped, 0 screened, 0 rejected\n"),
+        plain.stdout.contains(
+            "\n  samples       300 used of 300: 0 dropped, 0 still, 0 screened, 0 rejected\n"
+        ),
         "{}",
         plain.stdout
     );
@@ -1530,7 +1546,10 @@ fn every_real_recording_accounts_for_each_row() {
                         (Some(0), Some(0))
                     );
                     assert_eq!(v["robust_passes"], 0, "{what}");
-                    assert_eq!(v["selection"], plain_selection(), "{what}");
+                    // (Still periods are set aside with --plain too.)
+                    let mut selection = v["selection"].clone();
+                    selection["dwell"] = serde_json::json!([]);
+                    assert_eq!(selection, plain_selection(), "{what}");
                 }
             }
         }
@@ -1544,7 +1563,8 @@ fn plain_selection() -> Value {
         "clip_levels": [[null, null], [null, null], [null, null]],
         "screen": null,
         "residual_limit": null,
-        "runs": []
+        "runs": [],
+        "dwell": []
     })
 }
 
@@ -1685,7 +1705,7 @@ fn flags_of(r: &Run) -> Vec<(bool, String)> {
         .map(|row| {
             assert_eq!(row.len(), n, "{row:?}");
             let (used, class) = (&row[n - 2], &row[n - 1]);
-            let known = ["used", "screened", "rejected"].contains(&class.as_str())
+            let known = ["used", "dwell", "screened", "rejected"].contains(&class.as_str())
                 || class
                     .strip_prefix("dropped:")
                     .is_some_and(|rule| RULES.contains(&rule));
@@ -1829,7 +1849,7 @@ fn plot_marks_the_rows_the_fit_did_not_use() {
     assert_eq!(counts(&v), [298, 0, 2, 5]);
     let svg = std::fs::read_to_string(&out).expect("plot written");
     assert!(
-        svg.contains("305 rows: 298 used, 0 dropped, 2 screened, 5 rejected;"),
+        svg.contains("305 rows: 298 used, 0 dropped, 0 still, 2 screened, 5 rejected;"),
         "{svg}"
     );
     // One path of crosses per class in each of the four panels: 5 rejected
@@ -2343,4 +2363,187 @@ fn a_long_disturbance_is_left_out_from_a_window_start() {
         text.contains("the first fit was in doubt, and the fit that started without rows "),
         "{text}"
     );
+}
+
+/// `rows` with `before` copies of its first row before it and `after`
+/// copies of its last after it, each with a count of noise (-1, 0, 0 or
+/// +1 per axis, from a fixed LCG): a device lying still on the desk before
+/// and after the turns, as people record.
+fn with_still_ends(rows: &[[f64; 3]], before: usize, after: usize) -> Vec<[f64; 3]> {
+    let mut state = 12_345u32;
+    let mut still = |r: [f64; 3], n: usize| -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|_| {
+                r.map(|v| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    v + [-1.0, 0.0, 0.0, 1.0][(state >> 30) as usize]
+                })
+            })
+            .collect()
+    };
+    let (first, last) = (rows[0], rows[rows.len() - 1]);
+    [still(first, before), rows.to_vec(), still(last, after)].concat()
+}
+
+/// Rows as a header-less CSV.
+fn csv_of(rows: &[[f64; 3]]) -> String {
+    rows.iter()
+        .map(|r| format!("{},{},{}\n", r[0], r[1], r[2]))
+        .collect()
+}
+
+/// `icm20948_mag_300.csv` lying still 600 rows before its turns and 1 200
+/// after: the report counts the rows set aside as still periods, in text
+/// and JSON (with their balls, about the still ends), `apply --flags`
+/// marks exactly those rows `dwell`, and the plot draws them as a class of
+/// their own. The fit of the turns alone sets nothing aside.
+#[test]
+fn still_periods_are_reported_flagged_and_drawn() {
+    let path = real("icm20948_mag_300.csv");
+    let rows = read_xyz(&path);
+    let log = with_still_ends(&rows, 600, 1200);
+    let n = log.len();
+    assert_eq!(n, 2100);
+    let file = temp_file("still_ends.csv", csv_of(&log));
+    // Where the device lay still: at the first reading of the turns (row
+    // 600) and before, at their last (row 899) and after.
+    let lying_still = |i: usize| i <= 600 || i >= 899;
+
+    let turns = magcal(&["fit", &path, "--format", "json"], None).json();
+    assert_eq!(still(&turns), 0, "{turns}");
+    assert_eq!(turns["selection"]["dwell"], serde_json::json!([]));
+
+    for plain in [false, true] {
+        let mut args = vec!["fit", file.as_str(), "--format", "json"];
+        if plain {
+            args.push("--plain");
+        }
+        let v = magcal(&args, None).json();
+        let dwell = still(&v);
+        assert!(dwell > 0, "plain {plain}: {v}");
+        assert_accounts_for(&v, n as u64);
+        // The balls: at most 3, each about one of the still ends (a count
+        // of noise per axis: within 2 counts of its first reading), of a
+        // radius of a few counts.
+        let balls = balls_of(&v);
+        assert!(!balls.is_empty() && balls.len() <= 3, "{v}");
+        for (centre, radius) in &balls {
+            let near = |r: [f64; 3]| dist(*centre, r) < 2.0;
+            assert!(near(log[0]) || near(log[n - 1]), "{balls:?}");
+            assert!(*radius > 0.0 && *radius < 10.0, "{balls:?}");
+        }
+
+        // The text report states the same count and a position per ball.
+        let text_args: Vec<&str> = args
+            .iter()
+            .copied()
+            .filter(|a| *a != "--format" && *a != "json")
+            .collect();
+        let text = magcal(&text_args, None);
+        assert_eq!(text.code, 0, "{}", text.stderr);
+        let needle = format!(" {dwell} still (set aside: the device lay still within ");
+        assert!(text.stdout.contains(&needle), "{needle}\n{}", text.stdout);
+        let line = text
+            .stdout
+            .lines()
+            .find(|l| l.contains(&needle))
+            .expect("samples line");
+        assert_eq!(line.matches("within ").count(), balls.len(), "{line}");
+    }
+
+    // apply --flags marks exactly the rows counted, all lying still, and
+    // those alone in the balls that no rule dropped (up to rounding at a
+    // ball's surface: this test measures in f64).
+    let cal = temp_file(
+        "still_ends.cal.json",
+        magcal(&["fit", &file, "--format", "json"], None).stdout,
+    );
+    let v: Value = serde_json::from_slice(&std::fs::read(&cal).expect("cal")).expect("json");
+    let r = magcal(&["apply", &cal, &file, "--flags"], None);
+    assert!(r.stderr.is_empty(), "{}", r.stderr);
+    let flags = flags_of(&r);
+    assert_eq!(flags.len(), n);
+    let marked: Vec<usize> = (0..n).filter(|&i| flags[i].1 == "dwell").collect();
+    assert_eq!(marked.len() as u64, still(&v));
+    assert!(marked.iter().all(|&i| lying_still(i)), "{marked:?}");
+    let used = flags.iter().filter(|(u, _)| *u).count() as u64;
+    assert_eq!(Some(used), v["samples_used"].as_u64());
+    let balls = balls_of(&v);
+    for (i, (_, class)) in flags.iter().enumerate() {
+        let d = |(c, r): &([f64; 3], f64)| dist(*c, log[i]) / r;
+        if balls.iter().any(|b| d(b) < 1.0 - 1e-6) {
+            assert!(
+                class == "dwell" || class.starts_with("dropped:"),
+                "{i}: {class}"
+            );
+        } else if balls.iter().all(|b| d(b) > 1.0 + 1e-6) {
+            assert_ne!(class, "dwell", "{i}");
+        }
+    }
+
+    // The plot: counted in the subtitle, a legend entry, rings.
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("still_ends.svg");
+    let out = out.display().to_string();
+    let v = magcal(&["fit", &file, "--plot", &out, "--format", "json"], None).json();
+    let svg = std::fs::read_to_string(&out).expect("plot written");
+    let [used, dropped, screened, rejected] = counts(&v);
+    let dwell = still(&v);
+    assert!(
+        svg.contains(&format!(
+            "{n} rows: {used} used, {dropped} dropped, {dwell} still, {screened} screened, \
+             {rejected} rejected;"
+        )),
+        "{svg}"
+    );
+    assert!(svg.contains(&format!(">still, set aside ({dwell})</text>")));
+    // One path of rings in each of the four panels.
+    assert_eq!(svg.matches("<path class=\"dwell\"").count(), 4);
+}
+
+/// The still periods' balls of a fit JSON: `(centre, radius)`.
+fn balls_of(v: &Value) -> Vec<([f64; 3], f64)> {
+    v["selection"]["dwell"]
+        .as_array()
+        .expect("selection.dwell")
+        .iter()
+        .map(|b| {
+            let c = b["centre"].as_array().expect("centre");
+            let x = |i: usize| c[i].as_f64().expect("a number");
+            ([x(0), x(1), x(2)], b["radius"].as_f64().expect("radius"))
+        })
+        .collect()
+}
+
+/// Euclidean distance.
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Two still periods with one row of motion between them: the device
+/// hardly moved. Refused (exit 3) with the cause and the advice, in both
+/// precisions and formats.
+#[test]
+fn a_device_that_hardly_moved_is_refused_as_such() {
+    let rows = read_xyz(&real("icm20948_mag_300.csv"));
+    // Lying still at the recording's first reading (601 rows with it),
+    // one reading of the turns, lying still at its last (601 rows).
+    let log = with_still_ends(&[rows[0], rows[150], rows[299]], 600, 600);
+    assert_eq!(log.len(), 1203);
+    let file = temp_file("hardly_moved.csv", csv_of(&log));
+    for extra in [
+        &[][..],
+        &["--precision", "f32"],
+        &["--format", "json"],
+        &["--plain"],
+    ] {
+        let r = magcal(&[&["fit", file.as_str()][..], extra].concat(), None);
+        r.fails_with(3, "magcal: calibration refused: the device hardly moved: ");
+        assert!(
+            r.stderr
+                .trim_end()
+                .ends_with(": turn the sensor through all orientations while recording"),
+            "{}",
+            r.stderr
+        );
+    }
 }

@@ -23,7 +23,7 @@
 //! finite numbers whose row counts agree (drops by rule add up to
 //! `samples_dropped`, the outlier share is the screened and rejected rows'
 //! share, `--plain` screens and rejects nothing) and whose `selection` is
-//! well formed; a text report with its `samples` line; or CSV with its
+//! well formed (still rows counted have their spans); a text report with its `samples` line; or CSV with its
 //! header, and with `--flags` a `used` flag matching each row's class.
 //!
 //! Environment:
@@ -691,9 +691,10 @@ fn run_and_check(run: &Run) -> Result<i32, String> {
 /// The row counts, figures and selection of a fit JSON agree.
 fn check_counts(v: &Value, plain: bool) -> Result<(), String> {
     let count = |key: &str| v[key].as_u64().ok_or(format!("no count {key}"));
-    let [used, dropped, screened, rejected] = [
+    let [used, dropped, dwell, screened, rejected] = [
         count("samples_used")?,
         count("samples_dropped")?,
+        count("dwell")?,
         count("screened")?,
         count("rejected")?,
     ];
@@ -754,6 +755,19 @@ fn check_counts(v: &Value, plain: bool) -> Result<(), String> {
     let screen_ok = screen.is_null()
         || (screen["centre"].as_array().is_some_and(|c| c.len() == 3)
             && screen["radius"].as_f64().is_some_and(|r| r >= 0.0));
+    // At most 3 balls (centre, non-negative radius).
+    let balls_ok = s["dwell"].as_array().is_some_and(|balls| {
+        balls.len() <= 3
+            && balls.iter().all(|b| {
+                b["centre"]
+                    .as_array()
+                    .is_some_and(|c| c.len() == 3 && c.iter().all(|x| x.as_f64().is_some()))
+                    && b["radius"].as_f64().is_some_and(|r| r >= 0.0)
+            })
+    });
+    if !balls_ok || (dwell > 0 && s["dwell"].as_array().is_some_and(Vec::is_empty)) {
+        return Err("selection.dwell vs dwell".into());
+    }
     let limit = &s["residual_limit"];
     if !screen_ok || !(limit.is_null() || limit.as_f64().is_some_and(|l| l >= 0.0)) {
         return Err("selection.screen / residual_limit".into());
@@ -787,7 +801,7 @@ fn check_flags(stdout: &str) -> Result<(), String> {
         let ok = fields.len() == width
             && match fields[width - 2..] {
                 ["1", "used"] => true,
-                ["0", "screened" | "rejected"] => true,
+                ["0", "screened" | "rejected" | "dwell"] => true,
                 ["0", class] => class.strip_prefix("dropped:").is_some_and(|rule| {
                     [
                         "non_finite",

@@ -137,6 +137,9 @@ typedef enum {
   // The samples fill a volume instead of lying on a shell (a filled
   // cloud: not one magnetometer's readings of a turning device).
   MAGCAL_STATUS_FILLED_CLOUD = 25,
+  // The device hardly moved: beside the rows of its still periods (set
+  // aside, `MagcalResult::dwell`) too few rows in motion are left.
+  MAGCAL_STATUS_HARDLY_MOVED = 26,
 } MagcalStatus;
 
 // What `magcal_collector_offer` did with a reading.
@@ -183,13 +186,19 @@ typedef struct {
   // The limit it passed (the `MagcalThresholds` value, or the core's);
   // 0 when none.
   float limit;
-  // A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
-  // (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`), the version
-  // found (`UNSUPPORTED_VERSION`), the cargo feature left out
-  // (`NOT_ENABLED`: a number that `magcal_refusal_name` names); else 0.
+  // A count: samples kept (`TOO_FEW_SAMPLES`), rows in motion
+  // (`HARDLY_MOVED`), rows rejected (`TOO_MANY_OUTLIERS`), iterations
+  // (`NO_CONVERGENCE`), the version found (`UNSUPPORTED_VERSION`), the
+  // cargo feature left out (`NOT_ENABLED`: a number that
+  // `magcal_refusal_name` names); else 0.
   uint32_t count;
-  // What `count` is compared with: samples required, valid rows; else 0.
+  // What `count` is compared with: samples required, rows in motion
+  // required (`HARDLY_MOVED`; 0 when a fit of them was refused), valid
+  // rows; else 0.
   uint32_t of;
+  // Rows lying still, set aside as still periods (`HARDLY_MOVED`);
+  // else 0.
+  uint32_t still;
 } MagcalRefusal;
 
 // The judging limits (`magcal_config_default` fills the measured ones).
@@ -278,6 +287,10 @@ typedef struct {
   uint32_t samples_used;
   // Rows dropped by rule (non-finite, zero, rails, repeated, clipped).
   uint32_t samples_dropped;
+  // Rows set aside as still periods (those in a ball about where a
+  // device lay still): not outliers. `samples_used + samples_dropped
+  // + dwell + screened + rejected` is the number of samples.
+  uint32_t dwell;
   // Rows screened out (far from the others).
   uint32_t screened;
   // Rows rejected by their residual.

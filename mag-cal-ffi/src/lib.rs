@@ -96,11 +96,14 @@ pub enum MagcalStatus {
     /// The samples fill a volume instead of lying on a shell (a filled
     /// cloud: not one magnetometer's readings of a turning device).
     FilledCloud = 25,
+    /// The device hardly moved: beside the rows of its still periods (set
+    /// aside, `MagcalResult::dwell`) too few rows in motion are left.
+    HardlyMoved = 26,
 }
 
 impl MagcalStatus {
     /// Every status.
-    const ALL: [MagcalStatus; 26] = [
+    const ALL: [MagcalStatus; 27] = [
         Self::Ok,
         Self::NullPointer,
         Self::InvalidArgument,
@@ -127,6 +130,7 @@ impl MagcalStatus {
         Self::Undefined,
         Self::Other,
         Self::FilledCloud,
+        Self::HardlyMoved,
     ];
 }
 
@@ -135,6 +139,7 @@ impl From<Error> for MagcalStatus {
         match e {
             Error::TooFewSamples { .. } => Self::TooFewSamples,
             Error::AllSamplesEqual => Self::AllSamplesEqual,
+            Error::HardlyMoved { .. } => Self::HardlyMoved,
             Error::OutOfRange => Self::OutOfRange,
             Error::NotAnEllipsoid => Self::NotAnEllipsoid,
             Error::SingularSystem => Self::SingularSystem,
@@ -212,6 +217,9 @@ pub extern "C" fn magcal_error_str(status: i32) -> *const c_char {
         MagcalStatus::FilledCloud => {
             c"the samples fill a volume instead of lying on a sphere: not one magnetometer's readings"
         }
+        MagcalStatus::HardlyMoved => {
+            c"the device hardly moved: turn the sensor through all orientations while recording"
+        }
     };
     s.as_ptr()
 }
@@ -237,13 +245,19 @@ pub struct MagcalRefusal {
     /// The limit it passed (the `MagcalThresholds` value, or the core's);
     /// 0 when none.
     pub limit: f32,
-    /// A count: samples kept (`TOO_FEW_SAMPLES`), rows rejected
-    /// (`TOO_MANY_OUTLIERS`), iterations (`NO_CONVERGENCE`), the version
-    /// found (`UNSUPPORTED_VERSION`), the cargo feature left out
-    /// (`NOT_ENABLED`: a number that `magcal_refusal_name` names); else 0.
+    /// A count: samples kept (`TOO_FEW_SAMPLES`), rows in motion
+    /// (`HARDLY_MOVED`), rows rejected (`TOO_MANY_OUTLIERS`), iterations
+    /// (`NO_CONVERGENCE`), the version found (`UNSUPPORTED_VERSION`), the
+    /// cargo feature left out (`NOT_ENABLED`: a number that
+    /// `magcal_refusal_name` names); else 0.
     pub count: u32,
-    /// What `count` is compared with: samples required, valid rows; else 0.
+    /// What `count` is compared with: samples required, rows in motion
+    /// required (`HARDLY_MOVED`; 0 when a fit of them was refused), valid
+    /// rows; else 0.
     pub of: u32,
+    /// Rows lying still, set aside as still periods (`HARDLY_MOVED`);
+    /// else 0.
+    pub still: u32,
 }
 
 /// The cargo features a `MAGCAL_STATUS_NOT_ENABLED` refusal can name, by
@@ -282,6 +296,7 @@ impl MagcalRefusal {
             limit: 0.0,
             count: 0,
             of: 0,
+            still: 0,
         }
     }
 
@@ -320,6 +335,16 @@ impl MagcalRefusal {
             Error::TooFewSamples { found, required } => Self {
                 count: to_u32(found),
                 of: to_u32(required),
+                ..Self::plain(status)
+            },
+            Error::HardlyMoved {
+                moving,
+                still,
+                required,
+            } => Self {
+                count: to_u32(moving),
+                of: to_u32(required),
+                still: to_u32(still),
                 ..Self::plain(status)
             },
             Error::NoConvergence { iterations } => Self {
@@ -381,6 +406,11 @@ impl MagcalRefusal {
                 required: self.of as usize,
             },
             MagcalStatus::AllSamplesEqual => Error::AllSamplesEqual,
+            MagcalStatus::HardlyMoved => Error::HardlyMoved {
+                moving: self.count as usize,
+                still: self.still as usize,
+                required: self.of as usize,
+            },
             MagcalStatus::OutOfRange => Error::OutOfRange,
             MagcalStatus::NotAnEllipsoid => Error::NotAnEllipsoid,
             MagcalStatus::SingularSystem => Error::SingularSystem,
@@ -558,6 +588,26 @@ pub unsafe extern "C" fn magcal_refusal_message(
     text.total
 }
 
+/// The value C stored in a `MagcalStatus` field, as an integer of the
+/// enum's size: an `int` on most targets, one byte on `arm-none-eabi`
+/// (short enums, as GCC and Rust lay them out there: reading an `int`
+/// took the three padding bytes after it, which a struct copy may leave
+/// anything in).
+///
+/// # Safety
+/// `status` must be aligned and readable.
+unsafe fn read_status(status: *const MagcalStatus) -> i32 {
+    // SAFETY: the caller's word; the integer has the enum's size and
+    // alignment, and is valid for any bits.
+    unsafe {
+        match size_of::<MagcalStatus>() {
+            1 => i32::from(status.cast::<u8>().read()),
+            2 => i32::from(status.cast::<u16>().read()),
+            _ => status.cast::<i32>().read(),
+        }
+    }
+}
+
 /// The status of `*refusal` as an integer (C may have stored any value in
 /// the enum) and, when it is a status, the refusal; `None` for a null or
 /// misaligned pointer.
@@ -568,15 +618,16 @@ unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<Mag
     if refusal.is_null() || !refusal.is_aligned() {
         return None;
     }
-    // SAFETY: as documented; the enum is read as its `int`, and every
-    // other field is valid for any bits.
-    let (raw, figure, limit, count, of) = unsafe {
+    // SAFETY: as documented; the enum is read as the integer C stores it
+    // in ([`read_status`]), and every other field is valid for any bits.
+    let (raw, figure, limit, count, of, still) = unsafe {
         (
-            core::ptr::addr_of!((*refusal).status).cast::<i32>().read(),
+            read_status(core::ptr::addr_of!((*refusal).status)),
             core::ptr::addr_of!((*refusal).figure).read(),
             core::ptr::addr_of!((*refusal).limit).read(),
             core::ptr::addr_of!((*refusal).count).read(),
             core::ptr::addr_of!((*refusal).of).read(),
+            core::ptr::addr_of!((*refusal).still).read(),
         )
     };
     let refusal = MagcalStatus::ALL
@@ -588,6 +639,7 @@ unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<Mag
             limit,
             count,
             of,
+            still,
         });
     Some((raw, refusal))
 }
@@ -852,6 +904,10 @@ pub struct MagcalResult {
     pub samples_used: u32,
     /// Rows dropped by rule (non-finite, zero, rails, repeated, clipped).
     pub samples_dropped: u32,
+    /// Rows set aside as still periods (those in a ball about where a
+    /// device lay still): not outliers. `samples_used + samples_dropped
+    /// + dwell + screened + rejected` is the number of samples.
+    pub dwell: u32,
     /// Rows screened out (far from the others).
     pub screened: u32,
     /// Rows rejected by their residual.
@@ -934,6 +990,7 @@ impl<T: Real> From<&Fit<T>> for MagcalResult {
             robust_passes: r.robust_passes,
             samples_used: to_u32(r.samples_used),
             samples_dropped: to_u32(r.samples_dropped),
+            dwell: to_u32(r.dwell),
             screened: to_u32(r.screened),
             rejected: to_u32(r.rejected),
             radial_rms: r.radial_rms.to_f64(),
@@ -1693,6 +1750,16 @@ mod tests {
                 required: 10,
             },
             Error::AllSamplesEqual,
+            Error::HardlyMoved {
+                moving: 9,
+                still: 1143,
+                required: 10,
+            },
+            Error::HardlyMoved {
+                moving: 30,
+                still: 2400,
+                required: 0,
+            },
             Error::OutOfRange,
             Error::NotAnEllipsoid,
             Error::SingularSystem,
@@ -1750,7 +1817,7 @@ mod tests {
             assert_ne!(r.status, MagcalStatus::Other, "{e:?}");
             assert_eq!(message(&r, 512).0, e.to_string(), "{e:?}");
             // A copy through its bytes, as C stores one: the same message.
-            // SAFETY: `MagcalRefusal` is plain data without padding (20
+            // SAFETY: `MagcalRefusal` is plain data without padding (24
             // bytes), valid for the bytes of a valid one.
             let stored = unsafe {
                 type Bytes = [u8; size_of::<MagcalRefusal>()];
@@ -1802,6 +1869,7 @@ mod tests {
             limit: -0.6,
             count: 0,
             of: 0,
+            still: 0,
         };
         let rust = Error::FilledCloud {
             skewness: Figure::new(-0.75),
@@ -1879,6 +1947,106 @@ mod tests {
         assert_eq!(status, MagcalStatus::from(rust));
         assert_eq!(out.refusal.status, status);
         assert_eq!(message(&out.refusal, 512).0, rust.to_string());
+    }
+
+    /// `icm20948_mag_300.csv` as `[i16; 3]` counts, the device lying still
+    /// at its first reading `before` rows and at its last `after` rows
+    /// (a count of noise, -1, 0, 0 or +1 per axis from a fixed LCG), with
+    /// only the rows `turns` of the recording between.
+    fn with_still_ends(
+        turns: core::ops::Range<usize>,
+        before: usize,
+        after: usize,
+    ) -> Vec<[i16; 3]> {
+        let rows: Vec<[i16; 3]> = recording("icm20948_mag_300.csv")
+            .iter()
+            .map(|r| r.map(|v| v as i16))
+            .collect();
+        let mut state = 12_345u32;
+        let mut still = |r: [i16; 3], n: usize| -> Vec<[i16; 3]> {
+            (0..n)
+                .map(|_| {
+                    r.map(|v| {
+                        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        v + [-1, 0, 0, 1][(state >> 30) as usize]
+                    })
+                })
+                .collect()
+        };
+        let (first, last) = (rows[0], rows[rows.len() - 1]);
+        [
+            still(first, before),
+            rows[turns].to_vec(),
+            still(last, after),
+        ]
+        .concat()
+    }
+
+    /// `magcal_calibrate_*` of `samples` with the default configuration:
+    /// the status and the result.
+    fn calibrate_c(samples: &[[i16; 3]]) -> (MagcalStatus, MagcalResult) {
+        let c = config();
+        let mut out = core::mem::MaybeUninit::<MagcalResult>::zeroed();
+        // SAFETY: valid pointers; `out` is zeroed (valid for its fields).
+        unsafe {
+            let s = magcal_calibrate_i16(samples.as_ptr(), samples.len(), &c, out.as_mut_ptr());
+            (s, out.assume_init())
+        }
+    }
+
+    /// A log that starts and ends lying still: C reads the rows set aside
+    /// as the core counts them, and every row is counted once.
+    #[test]
+    fn still_rows_are_counted_in_the_result() {
+        let samples = with_still_ends(0..300, 600, 1200);
+        let fit = calibrate::<f32, _>(&samples, &Config::default()).unwrap();
+        let (status, out) = calibrate_c(&samples);
+        assert_eq!(status, MagcalStatus::Ok);
+        assert!(out.dwell > 0, "{out:?}");
+        assert_eq!(out.dwell as usize, fit.report.dwell);
+        let counted =
+            out.samples_used + out.samples_dropped + out.dwell + out.screened + out.rejected;
+        assert_eq!(counted as usize, samples.len());
+        // The recording alone: nothing set aside.
+        let (status, out) = calibrate_c(&with_still_ends(0..300, 0, 0));
+        assert_eq!((status, out.dwell), (MagcalStatus::Ok, 0));
+    }
+
+    /// Two still periods with one row of motion between them: the status
+    /// of its own, the counts in the refusal, and the core's message.
+    #[test]
+    fn a_device_that_hardly_moved_has_its_own_status() {
+        let samples = with_still_ends(150..151, 600, 600);
+        let rust = calibrate::<f32, _>(&samples, &Config::default()).unwrap_err();
+        let Error::HardlyMoved {
+            moving,
+            still,
+            required,
+        } = rust
+        else {
+            panic!("{rust:?}");
+        };
+        let (status, out) = calibrate_c(&samples);
+        assert_eq!(status, MagcalStatus::HardlyMoved);
+        let r = out.refusal;
+        assert_eq!(r.status, status);
+        assert_eq!(
+            (r.count as usize, r.still as usize, r.of as usize),
+            (moving, still, required)
+        );
+        assert!(still > 0 && moving < required, "{r:?}");
+        let (text, _) = message(&r, 512);
+        assert_eq!(text, rust.to_string());
+        assert!(text.starts_with("the device hardly moved: "), "{text}");
+        // SAFETY: a valid refusal; the name is static ("": no figure).
+        let name = unsafe { CStr::from_ptr(magcal_refusal_name(&r)) };
+        assert_eq!(name, c"");
+        // SAFETY: static NUL-terminated strings.
+        let sentence = unsafe { CStr::from_ptr(magcal_error_str(status as i32)) };
+        assert!(sentence
+            .to_str()
+            .unwrap()
+            .starts_with("the device hardly moved"));
     }
 
     #[test]

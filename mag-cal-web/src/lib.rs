@@ -878,6 +878,79 @@ mod tests {
         assert_eq!(code, 2);
     }
 
+    /// `n` readings of a device lying still at `at`, with a count of noise
+    /// (-1, 0, 0 or +1 per axis, from a fixed LCG seeded by `seed`).
+    fn lying_still(at: [f64; 3], n: usize, seed: u32) -> Vec<[f64; 3]> {
+        let mut state = seed;
+        (0..n)
+            .map(|_| {
+                at.map(|v| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    v + [-1.0, 0.0, 0.0, 1.0][(state >> 30) as usize]
+                })
+            })
+            .collect()
+    }
+
+    /// Still ends are a class of rows of their own, counted with the
+    /// others and marked per row; a device that hardly moved is a refusal
+    /// with its own cause and no other fit offered.
+    #[test]
+    fn still_rows_are_a_class_and_hardly_moving_a_refusal() {
+        let turns = ellipsoid(400);
+        let (first, last) = (turns[0], turns[399]);
+        let rows = [
+            lying_still(first, 500, 1),
+            turns.clone(),
+            lying_still(last, 800, 2),
+        ]
+        .concat();
+        let (code, text) = fit_json(&csv(&rows), b"", &|| 0.0);
+        assert_eq!(code, 0, "{text}");
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        let fit = &doc["fit"];
+        let dwell = fit["dwell"].as_u64().unwrap();
+        assert!(dwell > 0, "{fit}");
+        let count = |key: &str| fit[key].as_u64().unwrap();
+        assert_eq!(
+            count("samples_used")
+                + count("samples_dropped")
+                + dwell
+                + count("screened")
+                + count("rejected"),
+            rows.len() as u64
+        );
+        let classes = doc["classes"].as_array().unwrap();
+        let marked = classes.iter().filter(|c| *c == "dwell").count() as u64;
+        assert_eq!(marked, dwell);
+        // Every row marked lies in a still end.
+        assert!(classes
+            .iter()
+            .enumerate()
+            .all(|(i, c)| c != "dwell" || i <= 500 || i >= 899));
+
+        let hardly = [
+            lying_still(first, 500, 3),
+            vec![turns[200]],
+            lying_still(last, 500, 4),
+        ]
+        .concat();
+        let (code, text) = fit_json(&csv(&hardly), b"", &|| 0.0);
+        let doc: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            (code, doc["status"].as_str()),
+            (3, Some("refused")),
+            "{text}"
+        );
+        let message = doc["message"].as_str().unwrap();
+        assert!(
+            message.starts_with("calibration refused: the device hardly moved: "),
+            "{message}"
+        );
+        assert!(message.ends_with("turn the sensor through all orientations while recording"));
+        assert!(doc["offer"].is_null(), "{text}");
+    }
+
     /// A level turn about the sensor's -z axis: an ellipse in a plane.
     fn level_turn(n: usize) -> Vec<[f64; 3]> {
         (0..n)

@@ -424,6 +424,73 @@ test('a still device after a good fit: the refusal clears every result and says 
   await context.close();
 });
 
+// `rows` with its first reading repeated `before` times before it and its
+// last `after` times after it, each with a count of noise (-1, 0, 0 or +1
+// per axis, a fixed linear congruential generator): the device lying still
+// on the desk before and after its turns, as people record.
+function withStillEnds(rows, before, after) {
+  let state = 12345;
+  const still = (r, n) =>
+    Array.from({ length: n }, () =>
+      r.map((v) => {
+        state = (Math.imul(state, 1664525) + 1013904223) >>> 0;
+        return v + [-1, 0, 0, 1][state >>> 30];
+      }),
+    );
+  return [...still(rows[0], before), ...rows, ...still(rows[rows.length - 1], after)];
+}
+
+test('a log lying still before and after its turns shows the rows set aside as magcal counts them; one that hardly moved is refused as such', async () => {
+  const { page, errors, context } = await openPage();
+  const rows = readFileSync(join(REAL, 'icm20948_mag_300.csv'), 'utf8')
+    .trim()
+    .split('\n')
+    .map((line) => line.split(',').map(Number));
+  const csv = (r) => `${r.map((row) => row.join(',')).join('\n')}\n`;
+  const file = join(scratch, 'still_ends.csv');
+  writeFileSync(file, csv(withStillEnds(rows, 600, 1200)));
+  await openFile(page, file);
+  assert.match(await page.textContent('#verdict'), /^Calibrated: still_ends.csv/);
+  const [code, cli] = magcal(file);
+  assert.equal(code, 0);
+  assert.ok(cli.dwell > 0, JSON.stringify(cli));
+  assertSameCalibration(await shown(page), cli, 1e-9);
+  // The counts, as the CLI gives them, and where the device lay still as
+  // its text report names it.
+  assert.equal(
+    await page.textContent('[data-name="samples"]'),
+    `${cli.samples_used} used of 2100: ${cli.samples_dropped} dropped, ${cli.dwell} still, ${cli.screened} screened, ${cli.rejected} rejected`,
+  );
+  const report = execFileSync(MAGCAL, ['fit', file], { encoding: 'utf8' });
+  const where = report.match(/ still \(set aside: the device lay still (within .*?\))\), \d+ screened/)[1];
+  assert.equal(where.match(/within /g).length, cli.selection.dwell.length);
+  const note = await page.textContent('td[data-name="samples"] + td.note');
+  assert.equal(note, `still: set aside where the device lay still ${where}`);
+  // Each row's class: the still rows drawn in their own colour.
+  const classes = await page.evaluate(() => window.magcal.result.classes);
+  assert.equal(classes.filter((c) => c === 'dwell').length, cli.dwell);
+  assert.equal(await page.locator('#norms circle.dwell').count(), cli.dwell);
+  assert.match(await page.innerHTML('#cal-caption'), /<span class="dwell">still/);
+  await page.screenshot({ path: join(SHOTS, 'still-ends.png'), fullPage: true });
+
+  // The first reading, one of the turns and the last, each lying still
+  // 600 more times: the device hardly moved. A refusal of its own cause.
+  const hardly = join(scratch, 'hardly_moved.csv');
+  writeFileSync(hardly, csv(withStillEnds([rows[0], rows[150], rows[rows.length - 1]], 600, 600)));
+  await dropFile(page, hardly);
+  assert.match(await page.textContent('#verdict'), /^Refused: hardly_moved.csv/);
+  await assertCleared(page);
+  const [refused, cliLine] = magcal(hardly);
+  assert.equal(refused, 3);
+  const message = await page.textContent('#message');
+  assert.equal(`magcal: ${message}`, cliLine);
+  assert.match(message, /^calibration refused: the device hardly moved: .*: turn the sensor through all orientations while recording$/);
+  assert.ok(await page.isHidden('#offer'), 'no other fit offered');
+  assert.match(await page.textContent('#figures'), /^1203 rows from /);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
 // A recorded stream as a board running Adafruit's or PJRC's calibration
 // sketch prints it: `Raw:` lines of integers, with a banner and other
 // lines between. The magnetometer is magcal_25598.txt (a long real 3-D
@@ -652,10 +719,12 @@ test('a live refit that is refused takes the earlier calibration off the page, s
   assert.equal(await page.evaluate(() => window.magcal.streamEnded), false);
   assert.match(await page.textContent('#verdict'), /^Refused: serial/);
   await assertCleared(page);
-  const message = await page.textContent('#message');
+  // Both read at once: the board still sends, and a later refit may
+  // replace both between two reads.
+  const [message, status] = await page.evaluate(() => ['#message', '#status'].map((id) => document.querySelector(id).textContent));
   assert.match(message, /^calibration refused: /);
   assert.doesNotMatch(message, /magcal|--\w/);
-  assert.equal(await page.textContent('#status'), message);
+  assert.equal(status, message);
   // The send button stays off, and a click sends nothing.
   await page.dispatchEvent('#send', 'click');
   assert.deepEqual(await page.evaluate(() => window.__written), []);

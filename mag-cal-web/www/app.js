@@ -353,7 +353,7 @@ const RAW_CAPTION = {
   planar: "Raw samples, centred on the planar fit's centre and divided by the field in the plane",
 };
 const CAL_CAPTION = {
-  '3d': 'Calibrated samples on the unit sphere: <span class="used">used</span>, <span class="rejected">rejected</span>, <span class="screened">screened</span>',
+  '3d': 'Calibrated samples on the unit sphere: <span class="used">used</span>, <span class="rejected">rejected</span>, <span class="screened">screened</span>, <span class="dwell">still (set aside)</span>',
   planar: 'Planar calibration: u = K (y − centre) of every sample, on the unit circle (z = 0); the planar fit does not mark rows',
 };
 const NORMS_CAPTION = {
@@ -455,12 +455,32 @@ function show3d(doc) {
     ${figure('outlier share', q.outlier_share, `refused above ${lim.refuse_outlier_share}`)}
     ${figure('columns', html(doc.columns))}
     ${doc.skipped ? figure('input', html(doc.skipped)) : ''}
-    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.screened} screened, ${f.rejected} rejected`)}
+    ${figure('samples', `${f.samples_used} used of ${doc.rows}: ${f.samples_dropped} dropped, ${f.dwell} still, ${f.screened} screened, ${f.rejected} rejected`, stillNote(f))}
     ${figure('method', `${f.method} (LS ${f.ls}), ${f.precision}, ${f.robust ? 'robust' : 'plain'}; ${digits(f.timing_us / 1000, 3)} ms`)}
     </table>`;
   $('snippet-c').textContent = doc.snippets.c;
   $('copy-c').disabled = false;
   $('send').disabled = !port;
+}
+
+// `v` to `n` significant digits, trailing zeros kept, as magcal's text
+// report prints them (its `sig`): fixed for exponents -5 to n - 1,
+// otherwise `1.235e4`.
+function sig(v, n) {
+  if (!Number.isFinite(v) || v === 0) return String(v);
+  const e = Number(v.toExponential(n - 1).split('e')[1]);
+  return e >= -5 && e < n ? v.toFixed(n - 1 - e) : v.toExponential(n - 1).replace('e+', 'e');
+}
+
+// Where the device lay still (a ball about each still period, sensor
+// units; its rows set aside, no outliers), as magcal's text report names
+// it.
+function stillNote(f) {
+  if (!f.dwell || !f.selection.dwell.length) return '';
+  const balls = f.selection.dwell.map(
+    ({ centre, radius }) => `within ${sig(radius, 2)} of (${centre.map((v) => sig(v, 4)).join(', ')})`,
+  );
+  return `still: set aside where the device lay still ${balls.join(', ')}`;
 }
 
 const vector = (prefix, v) =>

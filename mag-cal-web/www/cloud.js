@@ -8,6 +8,7 @@ const COLOURS = {
   used: 0x2a6fdb,
   rejected: 0xd8342c,
   screened: 0xf08c00,
+  dwell: 0x2ca02c,
   dropped: 0x999999,
   raw: 0x2a6fdb,
 };

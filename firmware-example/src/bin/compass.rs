@@ -74,9 +74,10 @@ fn main() -> ! {
                 Ok(fit) => {
                     let r = &fit.report;
                     info!(
-                        "calibrated: {} samples used, {} left out, radial RMS {=f32}",
+                        "calibrated: {} samples used, {} left out, {} set aside lying still, radial RMS {=f32}",
                         r.samples_used,
                         r.samples_dropped + r.screened + r.rejected,
+                        r.dwell,
                         r.radial_rms
                     );
                     if storage::store(flash, &fit.calibration).is_err() {
