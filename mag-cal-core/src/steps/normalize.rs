@@ -135,7 +135,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
     if let Some(o) = origin {
         // Still periods hold at least a tenth of the rows.
         let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
-        sums = sums_about(rest, before_rest, o, &gate, still.then_some(&mut runs));
+        sums = sums_about(rest, before_rest, o, &gate, Some(&mut runs));
         sums.used += 1;
         if still {
             dwell = runs.finish();
