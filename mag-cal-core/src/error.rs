@@ -24,11 +24,11 @@ pub enum Error {
     /// The device hardly moved: beside the rows of its still periods
     /// (set aside, [`crate::Dwell`]) too few rows are left.
     HardlyMoved {
-        /// Rows in motion (outside the still periods, or the longest one).
+        /// Rows in motion (outside the still periods).
         moving: usize,
-        /// Rows lying still (set aside, or in the longest still period).
+        /// Rows lying still (set aside).
         still: usize,
-        /// Rows in motion required (`0`: a fit of them was refused).
+        /// Rows in motion required.
         required: usize,
     },
     /// The samples' spread cannot be represented in the working precision:
@@ -165,16 +165,6 @@ impl fmt::Display for Error {
                 "too few usable samples: {found} kept, at least {required} required"
             ),
             Error::AllSamplesEqual => f.write_str("all samples are equal: no spread to fit"),
-            Error::HardlyMoved {
-                moving,
-                still,
-                required: 0,
-            } => write!(
-                f,
-                "the device hardly moved: {still} samples lie still in one place and {moving} \
-                 others do not determine a calibration: turn the sensor through all \
-                 orientations while recording"
-            ),
             Error::HardlyMoved {
                 moving,
                 still,
@@ -714,11 +704,6 @@ mod tests {
                 moving: 6,
                 still: 2400,
                 required: 10
-            },
-            Error::HardlyMoved {
-                moving: 30,
-                still: 2400,
-                required: 0
             },
             Error::OutOfRange,
             Error::NotAnEllipsoid,

@@ -1755,11 +1755,6 @@ mod tests {
                 still: 1143,
                 required: 10,
             },
-            Error::HardlyMoved {
-                moving: 30,
-                still: 2400,
-                required: 0,
-            },
             Error::OutOfRange,
             Error::NotAnEllipsoid,
             Error::SingularSystem,

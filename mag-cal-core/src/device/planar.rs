@@ -419,7 +419,8 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     config: &PlanarConfig,
 ) -> Result<PlanarFit<T>, Error> {
     config.validate()?;
-    let scanned = scan_still::<T, S>(samples, true, config.still)?;
+    let mut dwell = crate::Dwell::NONE;
+    let scanned = scan_still::<T, S>(samples, true, config.still.then_some(&mut dwell))?;
     let screening = match screen(samples, &scanned) {
         Ok(s) => s,
         Err(Unscreened::AllEqual) => return Err(FitError::AllSamplesEqual.into()),
@@ -428,7 +429,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let gate = Gate {
         rules: screening.rules,
         screen: Some(screening.ball),
-        dwell: &scanned.dwell,
+        dwell: scanned.dwell,
     };
     let mut passes = SCAN_PASSES + screening.passes;
     let norm = screening.norm;
@@ -458,7 +459,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
     let valid = screening.valid;
     let report = figures.report(
         &w2,
-        (screening.drops, scanned.dwell),
+        (screening.drops, *scanned.dwell),
         valid,
         (flatness, axis_tilt_deg),
         passes,

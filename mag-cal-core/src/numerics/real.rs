@@ -32,6 +32,9 @@ pub trait Real:
     const MIN_POSITIVE: Self;
     /// Largest finite number of the type.
     const MAX: Self;
+    /// Zero, as a constant (for [`crate::Dwell::NONE`]).
+    #[doc(hidden)]
+    const ZERO: Self;
     /// No still period ([`crate::Dwell::NONE`]), for the gates that
     /// reference one: a constant per type, as a generic one cannot be
     /// borrowed for `'static`.
@@ -96,6 +99,7 @@ impl Real for f32 {
     const EPSILON: Self = f32::EPSILON;
     const MIN_POSITIVE: Self = f32::MIN_POSITIVE;
     const MAX: Self = f32::MAX;
+    const ZERO: Self = 0.0;
     const NO_DWELL: &'static crate::Dwell<Self> = &crate::Dwell::NONE;
     #[inline]
     fn lit(x: f64) -> Self {
@@ -172,6 +176,7 @@ impl Real for f64 {
     const EPSILON: Self = f64::EPSILON;
     const MIN_POSITIVE: Self = f64::MIN_POSITIVE;
     const MAX: Self = f64::MAX;
+    const ZERO: Self = 0.0;
     const NO_DWELL: &'static crate::Dwell<Self> = &crate::Dwell::NONE;
     #[inline]
     fn lit(x: f64) -> Self {

@@ -71,20 +71,16 @@ fn pipeline<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    // The still periods are set aside in the scan (issue 36).
-    let scan = normalize::scan_still::<T, S>(samples, config.robust, config.still)?;
+    // The still periods are set aside in the scan (issue 36), into this
+    // frame.
+    let mut dwell = crate::Dwell::NONE;
+    let still = config.still.then_some(&mut dwell);
+    let scan = normalize::scan_still::<T, S>(samples, config.robust, still)?;
     // Without outlier handling the plain path's answer is the answer.
     #[cfg(not(feature = "robust"))]
-    let fit = plain_path(samples, config, &scan, ls_solve, step);
+    return plain_path(samples, config, &scan, ls_solve, step);
     #[cfg(feature = "robust")]
-    let fit = robust_pipeline(samples, config, &scan, ls_solve, step);
-    // A device that never moved: a recording that is one time run nearly
-    // whole (`dwell::never_moved`) is not told from rows out of time order
-    // (a shuffled sphere is one run too), so its refusal keeps its cause
-    // (NoSphere for the contamination table's stationary and noise-ball
-    // kinds); only too few rows left beside still periods is refused as
-    // `Error::HardlyMoved` (in the scan).
-    fit
+    robust_pipeline(samples, config, &scan, ls_solve, step)
 }
 
 /// [`pipeline`] after the scan, with outlier handling compiled in: the
@@ -99,7 +95,7 @@ fn robust_pipeline<T: Real, S: Sample>(
     ls_solve: ellipsoid::Solve<T>,
     step: methods::Step<T, S>,
 ) -> Result<Fit<T>, Error> {
-    let gate = rules::Gate::of(scan.rules, &scan.dwell);
+    let gate = rules::Gate::of(scan.rules, scan.dwell);
     if config.robust && screen::clip_hint(samples, &gate, scan.used) {
         // A clip level may bend the plain fit unseen: screening finds it.
         return robust_path(samples, config, scan, ls_solve, step);

@@ -87,7 +87,7 @@ pub(super) fn plain_start<'s, T: Real, S: Sample>(
     let norm = scan.norm;
     // The rows the rules dropped stay out; without drops the scan's rules
     // are plain, and so are the loops.
-    let gate = rules::Gate::of(scan.rules, &scan.dwell);
+    let gate = rules::Gate::of(scan.rules, scan.dwell);
     let moments = moments::Moments::accumulate_with(samples, &norm, &gate, None, None);
     figures.flatness = Some(quality::flatness(&moments, scan.used)?);
     let (ls, gap) = match ls_step(&moments, ls_solve) {

@@ -242,15 +242,7 @@ pub(super) fn robust_start<'r, T: Real, S: Sample>(
         }
     };
     start_from(
-        samples,
-        config,
-        screening,
-        passes,
-        ls_solve,
-        figures,
-        runs,
-        k,
-        &scan.dwell,
+        samples, config, screening, passes, ls_solve, figures, runs, k, scan.dwell,
     )
 }
 

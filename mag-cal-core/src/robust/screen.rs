@@ -181,7 +181,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
     scan: &Scan<T>,
 ) -> Result<Screening<T>, Unscreened> {
     let (centre, spread, rules, mut passes) = median_centre(samples, scan);
-    let gate = Gate::of(rules, &scan.dwell);
+    let gate = Gate::of(rules, scan.dwell);
     if !(spread > T::zero()) || !spread.is_finite() {
         return Err(Unscreened::AllEqual);
     }
@@ -246,7 +246,7 @@ pub(crate) fn screen<T: Real, S: Sample>(
         inv_scale: inv_m,
     };
     let drops = if rules.clipping {
-        count_drops::<T, S>(samples, &rules)
+        count_drops::<T, S>(samples, &rules, scan.dwell)
     } else {
         scan.drops
     };
@@ -377,7 +377,7 @@ fn recentre<T: Real, S: Sample>(
 /// in the first pass (rows at the scan's extremes, `CLIP_SHARE`),
 /// and the passes it took.
 fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], T, Rules<T>, u32) {
-    let rows = Gate::of(scan.rules, &scan.dwell);
+    let rows = Gate::of(scan.rules, scan.dwell);
     // The window of the first histograms: the bounds of the subsample
     // (rows beyond them count below or above the window; a clip level is
     // an extreme that many rows share, so the subsample has it too).
@@ -400,7 +400,7 @@ fn median_centre<T: Real, S: Sample>(samples: &[S], scan: &Scan<T>) -> ([T; 3], 
     let mut rules = scan.rules;
     while passes < MAX_LEVELS && !done.iter().all(|&d| d) {
         let mut h = AxisHistograms::new(lo, hi);
-        let gate = Gate::of(rules, &scan.dwell);
+        let gate = Gate::of(rules, scan.dwell);
         // One pass fills the histograms; the first also counts per axis
         // the rows at the smallest and the largest value of the bounds
         // (the candidate clip levels).
@@ -625,7 +625,7 @@ mod tests {
         });
         let hint = |rows: &[[i16; 3]]| {
             let s = scan::<f32, [i16; 3]>(rows, true).unwrap();
-            let gate = Gate::of(s.rules, &s.dwell);
+            let gate = Gate::of(s.rules, s.dwell);
             clip_hint(rows, &gate, s.used)
         };
         assert!(!hint(&sphere));

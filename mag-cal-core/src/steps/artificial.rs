@@ -764,7 +764,7 @@ mod tests {
         assert_eq!(rows, plain);
         samples[17] = [0; 3];
         samples[400] = samples[399];
-        let gate = Gate::only(Rules::GLITCHES);
+        let gate = Gate::of(Rules::GLITCHES, &crate::Dwell::NONE);
         let pass = Pass {
             gate: &gate,
             runs: &Runs::NONE,

@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 use crate::sample::Sample;
 use crate::steps::dwell::{self, Dwell};
 use crate::steps::rules::{count_drops, Drops, Gate, Rules};
-use crate::tuning::{DWELL_SCALE, DWELL_SHARE};
+use crate::tuning::DWELL_SHARE;
 use crate::{Error, Real};
 
 /// Minimum number of finite samples for any fit: the LS ellipsoid has nine
@@ -53,7 +53,7 @@ impl<T: Real> Normalization<T> {
 
 /// What the normalisation pass learned about the input.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Scan<T: Real> {
+pub(crate) struct Scan<'d, T: Real> {
     pub norm: Normalization<T>,
     /// Rows the rules kept.
     pub used: usize,
@@ -63,8 +63,10 @@ pub(crate) struct Scan<T: Real> {
     /// dropped a row here, and no clip levels (screening finds those).
     pub rules: Rules<T>,
     /// The still periods set aside ([`crate::Dwell`]): `used` and
-    /// the normalisation leave them out.
-    pub dwell: Dwell<T>,
+    /// the normalisation leave them out. By reference, in the caller's
+    /// frame: a `Scan` returned whole held it twice on the fit's deepest
+    /// stack (the result and its value).
+    pub dwell: &'d Dwell<T>,
 }
 
 /// One pass over the samples: applies the drop rules (the glitch rules
@@ -75,17 +77,21 @@ pub(crate) struct Scan<T: Real> {
 /// variance `mean|y - y0|^2 - |mean(y - y0)|^2` cancels only when `y0` is
 /// far outside the cloud; that case is detected and the spread recomputed
 /// in a second pass around the now-known mean.
-pub(crate) fn scan<T: Real, S: Sample>(samples: &[S], glitches: bool) -> Result<Scan<T>, Error> {
-    scan_still(samples, glitches, false)
-}
-
-/// [`scan`] that, with `still`, also sets the still periods aside
-/// ([`crate::Dwell`]: one pass more, over the rows the rules keep).
-pub(crate) fn scan_still<T: Real, S: Sample>(
+pub(crate) fn scan<T: Real, S: Sample>(
     samples: &[S],
     glitches: bool,
-    still: bool,
-) -> Result<Scan<T>, Error> {
+) -> Result<Scan<'static, T>, Error> {
+    scan_still(samples, glitches, None)
+}
+
+/// [`scan`] that, given `still`, also sets the still periods aside
+/// ([`crate::Dwell`], written there: one pass more, over the rows the
+/// rules keep).
+pub(crate) fn scan_still<'d, T: Real, S: Sample>(
+    samples: &[S],
+    glitches: bool,
+    still: Option<&'d mut Dwell<T>>,
+) -> Result<Scan<'d, T>, Error> {
     let zero = T::zero();
     // The rules first, in a loop of their own (integer compares for integer
     // samples): when nothing is dropped, the sums take the plain loop.
@@ -95,7 +101,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         Rules::PLAIN
     };
     let mut drops = if glitches {
-        count_drops::<T, S>(samples, &rules)
+        count_drops::<T, S>(samples, &rules, T::NO_DWELL)
     } else {
         Drops::default()
     };
@@ -130,55 +136,23 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         sum_sq: zero,
     };
     let mut dwell = Dwell::NONE;
-    // The sums outside the still periods, when the guard's pass made them.
-    let mut outside = None;
     if let Some(o) = origin {
         // Still periods hold at least a tenth of the rows.
         let mut runs = dwell::Tracker::new(samples.len() / DWELL_SHARE);
         sums = sums_about(rest, before_rest, o, &gate, Some(&mut runs));
         sums.used += 1;
-        if still {
-            dwell = runs.finish();
-        }
-        if !dwell.is_empty() {
-            // The guard: a ball's radius is below `DWELL_SCALE` times the
-            // spread of every row kept (rows out of time order are one
-            // run as wide as they are), or of the rows outside every ball
-            // (at least `MIN_SAMPLES`) when that is larger: a long still
-            // period on one side shrinks the spread of all rows towards
-            // its own noise (10x the motion at 3 % noise brought it below
-            // its ball's radius: `icm20948_mag_300.csv` refused NoSphere).
-            let beside = sums_about(
-                samples,
-                None,
-                o,
-                &Gate {
-                    dwell: &dwell,
-                    ..gate
-                },
-                None,
-            );
-            let mut var = sums.variance();
-            if beside.used >= MIN_SAMPLES && beside.variance() > var {
-                var = beside.variance();
-            }
-            if !dwell.keep_within(var * T::lit(DWELL_SCALE * DWELL_SCALE)) {
-                outside = Some(beside);
-            }
+        if still.is_some() {
+            dwell = runs.finish(sums.used, sums.variance());
         }
     }
-    // The still periods' rows leave the sums: the guard's pass, or one
-    // more when the guard left a ball out.
+    // The still periods' rows leave the sums: one pass more.
     let kept = sums.used;
     let gate = Gate {
         dwell: &dwell,
         ..gate
     };
     if let Some(o) = origin.filter(|_| !dwell.is_empty()) {
-        sums = match outside {
-            Some(beside) => beside,
-            None => sums_about(samples, None, o, &gate, None),
-        };
+        sums = sums_about(samples, None, o, &gate, None);
     }
     let aside = kept.saturating_sub(sums.used);
     let Sums { used, sum, sum_sq } = sums;
@@ -186,7 +160,7 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
         // Non-finite rows in the plain pipeline (which counts after the
         // sums); with the glitch rules this cannot happen, as both loops
         // apply the same rules.
-        drops = count_drops::<T, S>(samples, &gate.rules);
+        drops = count_drops::<T, S>(samples, &gate.rules, &dwell);
     }
     let Some(o) = origin.filter(|_| used >= MIN_SAMPLES) else {
         if aside > 0 {
@@ -238,6 +212,13 @@ pub(crate) fn scan_still<T: Real, S: Sample>(
     }
     let scale = var.square_root();
     dwell.set_rows(aside);
+    let dwell = match still {
+        Some(out) => {
+            *out = dwell;
+            &*out
+        }
+        None => T::NO_DWELL,
+    };
     Ok(Scan {
         norm: Normalization {
             centre,

@@ -175,8 +175,12 @@ impl<T: Real> Rules<T> {
         }
     }
 
+    /// Whether `v` lies on a clip level. Applied after [`check`] and the
+    /// still periods ([`Gate::admit`], [`Selection::classify`]): a still
+    /// row on a clip level is a still row (the scan counts still rows
+    /// before screening finds the clip levels).
     #[inline(always)]
-    fn clipped(&self, v: &[T; 3]) -> bool {
+    pub(crate) fn clipped(&self, v: &[T; 3]) -> bool {
         // Written out per axis: the iterator form keeps the row in memory
         // at opt-level "s", in every gated pass.
         let [[l0, h0], [l1, h1], [l2, h2]] = self.clip;
@@ -215,9 +219,6 @@ pub(crate) fn check<T: Real, S: Sample>(
         if !(v[0].abs() <= limit && v[1].abs() <= limit && v[2].abs() <= limit) {
             return Err(Rule::Overflow);
         }
-    }
-    if rules.clipped(&v) {
-        return Err(Rule::Clipped);
     }
     Ok(v)
 }
@@ -272,15 +273,6 @@ impl<'d, T: Real> Gate<'d, T> {
             rules,
             screen: None,
             dwell,
-        }
-    }
-
-    /// The gate of `rules` alone.
-    pub(crate) const fn only(rules: Rules<T>) -> Self {
-        Self {
-            rules,
-            screen: None,
-            dwell: T::NO_DWELL,
         }
     }
 
@@ -374,6 +366,10 @@ impl<'d, T: Real> Gate<'d, T> {
         #[cfg(feature = "robust")]
         if self.dwell.holds(y) {
             return Err(None);
+        }
+        #[cfg(feature = "robust")]
+        if self.rules.clipped(&y) {
+            return Err(Some(Rule::Clipped));
         }
         #[cfg(feature = "robust")]
         match &self.screen {
@@ -530,6 +526,9 @@ impl<T: Real> Selection<T> {
             if dwell.holds(y) {
                 return SampleClass::Dwell;
             }
+            if rules.clipped(&y) {
+                return SampleClass::Dropped(Rule::Clipped);
+            }
             if ball.is_some_and(|b| !b.contains(y)) {
                 return SampleClass::Screened;
             }
@@ -602,8 +601,13 @@ fn glitch<S: Sample>(sample: &S, prev: Option<&S>) -> Option<Rule> {
     }
 }
 
-/// Counts the drops of every rule over the slice.
-pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -> Drops {
+/// Counts the drops of every rule over the slice; rows in a ball of
+/// `dwell` are still rows, not drops.
+pub(crate) fn count_drops<T: Real, S: Sample>(
+    samples: &[S],
+    rules: &Rules<T>,
+    dwell: &Dwell<T>,
+) -> Drops {
     let mut drops = Drops::default();
     let mut prev = None;
     // Without the `robust` feature, the gated loop below alone (flash over
@@ -633,7 +637,7 @@ pub(crate) fn count_drops<T: Real, S: Sample>(samples: &[S], rules: &Rules<T>) -
     // Through the gate's out-of-line check, no ball: no second copy of
     // the rules for this loop (it runs with clip levels or on
     // floating-point rows).
-    let gate = Gate::only(*rules);
+    let gate = Gate::of(*rules, dwell);
     for s in samples {
         if let Err(Some(rule)) = gate.admit(s, prev) {
             drops.count(rule);
@@ -659,7 +663,7 @@ mod tests {
             [4.0, 5.0, 6.0],
             [4.0, 5.0, 6.5],
         ];
-        let d = count_drops::<f64, _>(&rows, &Rules::GLITCHES);
+        let d = count_drops::<f64, _>(&rows, &Rules::GLITCHES, &Dwell::NONE);
         assert_eq!(
             d,
             Drops {
@@ -672,17 +676,21 @@ mod tests {
             }
         );
         assert_eq!(d.total(), 5);
-        let plain = count_drops::<f64, _>(&rows, &Rules::PLAIN);
+        let plain = count_drops::<f64, _>(&rows, &Rules::PLAIN, &Dwell::NONE);
         assert_eq!((plain.total(), plain.non_finite, plain.overflow), (2, 1, 1));
         let ints: [[i16; 3]; 4] = [[1, 2, 3], [32767, 0, 1], [5, -32768, 1], [-32767, 4, 4]];
-        assert_eq!(count_drops::<f32, _>(&ints, &Rules::GLITCHES).rails, 3);
+        assert_eq!(
+            count_drops::<f32, _>(&ints, &Rules::GLITCHES, &Dwell::NONE).rails,
+            3
+        );
         // (Clip levels are the robust path's: without it no gate applies
         // them, `Gate::admit`.)
         #[cfg(feature = "robust")]
         let clip = Rules::with_clip([[f32::MAX, 5.0], [f32::MAX; 2], [-1.0, f32::MAX]]);
         #[cfg(feature = "robust")]
         assert_eq!(
-            count_drops::<f32, _>(&[[5i16, 0, 3], [4, 4, -1], [1, 2, 3]], &clip).clipped,
+            count_drops::<f32, _>(&[[5i16, 0, 3], [4, 4, -1], [1, 2, 3]], &clip, &Dwell::NONE)
+                .clipped,
             2
         );
     }
