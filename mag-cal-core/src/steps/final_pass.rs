@@ -361,12 +361,9 @@ fn final_block<T: Real, S: Sample>(
     #[cfg(feature = "robust")]
     let mut max = acc.max;
     let (mut passed, mut used) = (0, 0);
-    // Without the `robust` feature, the gated loop alone
-    // ([`Gate::plain_loop`]).
-    let plain = gate.plain_loop();
     let mut last = prev;
     for s in block {
-        let row = gate.pass_in(plain, s, last);
+        let row = gate.pass(s, last);
         last = Some(s);
         let Some(y) = row else {
             continue;

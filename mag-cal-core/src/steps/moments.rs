@@ -140,9 +140,6 @@ impl<T: Real> Moments<T> {
         hist: Option<&mut LogHistogram>,
         stride: usize,
     ) -> Self {
-        if gate.plain_loop() && cut.is_none() && stride <= 1 {
-            return Self::accumulate(samples, norm);
-        }
         Self::accumulate_finding(samples, norm, gate, &Runs::NONE, cut, hist, stride, None)
     }
 

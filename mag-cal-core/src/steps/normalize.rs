@@ -94,7 +94,7 @@ pub(crate) fn scan_still<'d, T: Real, S: Sample>(
 ) -> Result<Scan<'d, T>, Error> {
     let zero = T::zero();
     // The rules first, in a loop of their own (integer compares for integer
-    // samples): when nothing is dropped, the sums take the plain loop.
+    // samples).
     let rules = if glitches {
         Rules::GLITCHES
     } else {

@@ -284,51 +284,19 @@ impl<'d, T: Real> Gate<'d, T> {
             && self.dwell.is_empty()
     }
 
-    /// Whether a pass over the rows the gate passes takes its plain loop
-    /// (each row converted inline, `check` with [`Rules::PLAIN`]): the
-    /// gate is plain. Without the `robust` feature never:
-    /// the scan, the moments and the final pass link their gated loops
-    /// alone (the same rows in the same order, so the same sums). Flash
-    /// over speed, as the plain build is for parts where flash decides:
-    /// LS9 + ADC2 on a Cortex-M4F 26 808 -> 24 640 bytes of flash
-    /// (`bash bench.sh flash`), and on 1000 clean `[i16; 3]` samples
-    /// 402 440 -> 609 360 instructions (the out-of-line [`Gate::pass`] on
-    /// every row of three passes: the scan's about 39 000, the moments'
-    /// 93 000, the final pass's 75 000, for 240, 884 and 1 044 bytes; the
-    /// bench's `adc2` line built with `--features qemu-base`).
-    #[inline(always)]
-    pub(crate) fn plain_loop(&self) -> bool {
-        cfg!(feature = "robust") && self.is_plain()
-    }
-
     /// The components of a row the gate passes ([`Gate::admit`]).
     ///
     /// Out of line (in `admit`): one copy for every gated loop. Inlined, the rules and
     /// the ball took about 300 bytes in each of 16 loops (LS9 + ADC2 on a
     /// Cortex-M4F: 47 312 -> 42 616 bytes of flash, `bench.sh footprint`),
     /// for about 10 instructions a gated row more (LS9 + ADC2, n = 1000,
-    /// a tenth of the rows displaced: 1.56 M -> 1.70 M instructions; clean
-    /// data take the plain loops, [`Gate::plain_loop`], and do not pay it).
+    /// a tenth of the rows displaced: 1.56 M -> 1.70 M instructions).
+    /// Clean data pay it too: the moments' and the final pass's loops have
+    /// no plain copy (LS9 + ADC2 232 bytes less flash, clean `adc2` about
+    /// 1.5 x the instructions, `bash bench.sh flash` and `bench`).
     #[inline(always)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
         self.admit(sample, prev).ok()
-    }
-
-    /// [`Gate::pass`] in a loop that chose its kind once: with `plain`
-    /// ([`Gate::plain_loop`]) the row is only converted, inline (the same
-    /// rows as the plain gate passes), else it goes through the gate.
-    #[inline(always)]
-    pub(crate) fn pass_in<S: Sample>(
-        &self,
-        plain: bool,
-        sample: &S,
-        prev: Option<&S>,
-    ) -> Option<[T; 3]> {
-        if plain {
-            check::<T, S>(sample, None, &Rules::PLAIN).ok()
-        } else {
-            self.pass(sample, prev)
-        }
     }
 
     /// The components of a row the gate passes, or the rule that drops
@@ -611,8 +579,8 @@ pub(crate) fn count_drops<T: Real, S: Sample>(
     let mut drops = Drops::default();
     let mut prev = None;
     // Without the `robust` feature, the gated loop below alone (flash over
-    // speed, as [`Gate::plain_loop`]: LS9 + ADC2 plain 22 348 -> 22 056
-    // bytes, `bash bench.sh flash`).
+    // speed: LS9 + ADC2 plain 22 348 -> 22 056 bytes, `bash bench.sh
+    // flash`).
     if cfg!(feature = "robust") && S::ALWAYS_FINITE && rules.glitches && !rules.clipping {
         // Integer rows: the loop of the scan on clean data, no conversion.
         // The three tests are combined without branches (`|`, not `||`);
