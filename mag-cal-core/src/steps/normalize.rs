@@ -246,7 +246,6 @@ struct Sums<T> {
 
 impl<T: Real> Sums<T> {
     /// The mean squared distance of the rows from their mean.
-    #[inline(never)]
     fn variance(&self) -> T {
         let n = T::from_count(self.used);
         let mean = [self.sum[0] / n, self.sum[1] / n, self.sum[2] / n];
