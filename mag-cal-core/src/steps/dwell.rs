@@ -23,10 +23,11 @@
 //!   its end, of [`DWELL_RADIUS`] times its rows' mean sigma. At most
 //!   [`DWELL_SPANS`], the first.
 //!
-//! After the scan's sums ([`Tracker::finish`]), a ball whose radius is
-//! below [`DWELL_SCALE`] times the spread of the rows outside the runs
-//! (estimated from all rows' spread: a long still period on one side
-//! shrinks it) is a still period. The
+//! After the scan's sums ([`Tracker::finish`], [`Dwell::keep_within`]), a
+//! ball whose radius is below [`DWELL_SCALE`](crate::tuning::DWELL_SCALE)
+//! times the rows' spread (or the spread of the rows outside the balls,
+//! when larger: a long still period on one side shrinks the spread of all
+//! rows) is a still period. The
 //! spread guards rows that are not in time order (a shuffled or
 //! interleaved recording): their second differences are as large as their
 //! spread, and every row would lie in one run.
@@ -43,9 +44,7 @@
 //! told from rows out of time order, which are one run too.
 
 use crate::steps::rules::Ball;
-use crate::tuning::{
-    DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS, DWELL_SCALE, DWELL_SHARE,
-};
+use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RADIUS};
 use crate::Real;
 
 /// The noise's average starts at the smallest of this many second
@@ -159,8 +158,6 @@ pub(crate) struct Tracker<T: Real> {
     noise_sum: T,
     /// The rows of a run long enough to be a still period.
     long: usize,
-    /// The rows of the runs kept as balls.
-    held: usize,
     /// The balls of the runs that were long enough, in time order.
     found: Dwell<T>,
 }
@@ -179,7 +176,6 @@ impl<T: Real> Tracker<T> {
             kept: 0,
             noise_sum: T::zero(),
             long: long.max(DWELL_MIN_RUN),
-            held: 0,
             found: Dwell::NONE,
         }
     }
@@ -299,37 +295,31 @@ impl<T: Real> Tracker<T> {
             }
             None => false,
         };
-        if merged || found.push(c, r * r) {
-            self.held += self.kept;
+        if !merged {
+            found.push(c, r * r);
         }
     }
 
-    /// The still periods: the balls of the runs long enough, the open one
-    /// closed, that pass the guard against rows out of time order. Each
-    /// ball's radius must be below [`DWELL_SCALE`] times the spread of the
-    /// rows outside the runs, bounded above by the spread of the `rows`
-    /// rows kept (`variance`, their mean squared distance from their mean)
-    /// scaled by `rows / (rows - held)`, `held` the rows of the runs (at
-    /// most [`DWELL_SHARE`] times): a long still period on one side
-    /// shrinks the spread of all rows towards its own noise (10x the
-    /// motion at 3 % noise brought it below its ball's radius:
-    /// `icm20948_mag_300.csv` refused NoSphere), while rows out of time
-    /// order are one run as wide as they are.
-    pub(crate) fn finish(&mut self, rows: usize, variance: T) -> Dwell<T> {
+    /// The balls of the runs long enough, the open one closed.
+    pub(crate) fn finish(&mut self) -> Dwell<T> {
         self.close();
-        let moving = rows
-            .saturating_sub(self.held)
-            .max(rows / DWELL_SHARE)
-            .max(1);
-        let limit_sq = variance * T::from_count(rows) / T::from_count(moving)
-            * T::lit(DWELL_SCALE * DWELL_SCALE);
-        let mut kept = Dwell::NONE;
-        for b in self.found.used() {
+        self.found
+    }
+}
+
+impl<T: Real> Dwell<T> {
+    /// Keeps the balls whose squared radius is below `limit_sq` (in
+    /// place: each read before written, the slots left zeros), and says
+    /// whether any was left out.
+    pub(crate) fn keep_within(&mut self, limit_sq: T) -> bool {
+        let found = usize::from(self.len);
+        let all = core::mem::replace(self, Self::NONE);
+        for b in all.balls.iter().take(found) {
             if b.radius_sq < limit_sq {
-                kept.push(b.centre, b.radius_sq);
+                self.push(b.centre, b.radius_sq);
             }
         }
-        kept
+        usize::from(self.len) < found
     }
 }
 
@@ -404,7 +394,11 @@ mod tests {
             .map(|r| (0..3).map(|a| (r[a] - mean[a]).powi(2)).sum::<f64>())
             .sum::<f64>()
             / n;
-        runs.finish(rows.len(), var)
+        // The guard on all rows' spread (the scan also tries the spread
+        // of the rows outside the balls).
+        let mut d = runs.finish();
+        d.keep_within(var * crate::tuning::DWELL_SCALE * crate::tuning::DWELL_SCALE);
+        d
     }
 
     #[test]

@@ -11,7 +11,9 @@ use crate::numerics::histogram::LogHistogram;
 use crate::robust::runs::{RunFinder, Runs};
 use crate::sample::Sample;
 use crate::steps::normalize::{Normalization, Projector};
-use crate::steps::rules::{check, every, Gate, Rules};
+#[cfg(feature = "bench-internals")]
+use crate::steps::rules::{check, Rules};
+use crate::steps::rules::{every, Gate};
 use crate::Real;
 
 /// Number of monomials `x^p y^q z^r` with `p + q + r <= 4`.
@@ -93,6 +95,10 @@ impl<T: Real> Moments<T> {
     /// marked first (the gated pass's loops, `sum_low` and
     /// `sum_high`), 84 with a plain copy of the two loops, 134 for one
     /// loop (design document, section 13).
+    /// The fit's passes go through [`Moments::accumulate_finding`] (every
+    /// row through the gate, flash over speed); this plain copy is the
+    /// benches' (feature `bench-internals`).
+    #[cfg(feature = "bench-internals")]
     pub fn accumulate<S: Sample>(samples: &[S], norm: &Normalization<T>) -> Self {
         let mut sums = [T::zero(); COUNT];
         for block in samples.chunks(BLOCK) {
