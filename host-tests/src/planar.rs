@@ -2,12 +2,15 @@
 //! the turns with tilts, and the heading errors of the planar fit against
 //! the truth and against the three-dimensional fit of the same sensor
 //! (`tests/planar.rs`, and the `planar-table` binary for
-//! `docs/results.md`).
+//! `docs/results.md`); the ground robot's log of issue 36 ("still, one
+//! slow turn, still": [`robot_log`]) and how far a planar fit lies from
+//! another ([`Shift`]), for `tests/still_planar.rs` and the `still-table`
+//! binary.
 
 use mag_cal_core::heading::heading_deg;
-use mag_cal_core::planar::{calibrate_planar, PlanarConfig, PlanarFit};
-use mag_cal_core::{calibrate, Config};
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use mag_cal_core::planar::{calibrate_planar, Error, PlanarCalibration, PlanarConfig, PlanarFit};
+use mag_cal_core::{calibrate, Config, Real};
+use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
 
 use crate::sim::{fibonacci_sphere, Rng};
 
@@ -222,4 +225,157 @@ pub fn render(rows: &[TiltRow]) -> String {
         ));
     }
     t
+}
+
+/// The robot's sensor: soft iron (field 400 counts) and hard iron.
+pub fn robot_sensor() -> (Matrix3<f64>, Vector3<f64>) {
+    let s = Matrix3::new(1.12, 0.05, -0.02, 0.05, 0.93, 0.03, -0.02, 0.03, 1.01);
+    (s * 400.0, Vector3::new(85.0, -140.0, 30.0))
+}
+
+/// The robot's field in the plane of its turns (the horizontal field
+/// through the soft iron), counts: the RMS distance of the noiseless turn
+/// from its centre.
+pub fn robot_plane_field() -> f64 {
+    let (t, _) = robot_sensor();
+    let body = |psi: f64| t * (attitude(psi, 0.0, 0.0) * earth());
+    let n = 720;
+    let pts: Vec<Vector3<f64>> = (0..n)
+        .map(|i| body(i as f64 / n as f64 * std::f64::consts::TAU))
+        .collect();
+    let mean = pts.iter().sum::<Vector3<f64>>() / n as f64;
+    (pts.iter().map(|p| (p - mean).norm_squared()).sum::<f64>() / n as f64).sqrt()
+}
+
+/// A reading of the level robot at heading `psi` (radians), normal noise
+/// of `sigma` counts per axis, its length clipped at 2.2 sigma (the log has
+/// no row beyond 5 % of the field).
+pub fn robot_reading(psi: f64, sigma: f64, rng: &mut Rng) -> [f64; 3] {
+    let (t, b) = robot_sensor();
+    let h = attitude(psi, 0.0, 0.0) * earth();
+    let n = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+    let n = n * (2.2 / n.norm()).min(1.0) * sigma;
+    let y = t * h + b + n;
+    [y.x, y.y, y.z]
+}
+
+/// "Still, one slow turn, still": `still` rows at the start heading with
+/// noise `still_noise` (share of the field in the plane, per axis), `turn`
+/// rows of `turns` slow turns with noise `turn_noise`, `still` rows at the
+/// end heading. The rows, and the range of the turn's.
+pub fn robot_log(
+    still: usize,
+    turn: usize,
+    (still_noise, turn_noise): (f64, f64),
+    turns: f64,
+    seed: u64,
+) -> (Vec<[f64; 3]>, std::ops::Range<usize>) {
+    let mut rng = Rng::for_case(seed, 36);
+    let field = robot_plane_field();
+    let (start, end) = (0.3, 0.3 + turns * std::f64::consts::TAU);
+    let mut rows: Vec<[f64; 3]> = (0..still)
+        .map(|_| robot_reading(start, still_noise * field, &mut rng))
+        .collect();
+    for i in 0..turn {
+        let psi = start + (end - start) * (i as f64 + 0.5) / turn as f64;
+        rows.push(robot_reading(psi, turn_noise * field, &mut rng));
+    }
+    rows.extend((0..still).map(|_| robot_reading(end, still_noise * field, &mut rng)));
+    (rows, still..still + turn)
+}
+
+/// The heading error that 1 % of the field makes at most: `asin(0.01)`.
+pub const HEADING_OF_ONE_PERCENT: f64 = 0.573;
+
+/// How far a fit lies from the fit without the still rows, in units of the
+/// latter's field in the plane: the centre within the plane, the field
+/// strength, `K^T K` (Frobenius, relative to its norm), and the largest
+/// heading difference over the recording's rows (degrees, their mean
+/// difference removed: one alignment).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Shift {
+    pub centre: f64,
+    pub field: f64,
+    pub m: f64,
+    pub heading: f64,
+}
+
+impl Shift {
+    /// The shift of `fit` from `base`, the heading over `rows`.
+    pub fn of<T: Real>(base: &PlanarFit<T>, fit: &PlanarFit<T>, rows: &[[f64; 3]]) -> Self {
+        let f = |v: T| v.to_f64();
+        let (a, b) = (&base.calibration, &fit.calibration);
+        let rho = f(a.plane_strength());
+        let axis = Vector3::from(a.axis().map(f));
+        let dc = Vector3::from(b.centre().map(f)) - Vector3::from(a.centre().map(f));
+        let in_plane = dc - axis * dc.dot(&axis);
+        let k = |c: &PlanarCalibration<T>| {
+            let m = c.matrix();
+            SMatrix::<f64, 2, 3>::from_fn(|i, j| f(m[i][j]))
+        };
+        let (ka, kb) = (k(a), k(b));
+        let (ma, mb) = (ka.transpose() * ka, kb.transpose() * kb);
+        let diffs: Vec<f64> = rows
+            .iter()
+            .map(|r| {
+                let s = r.map(|v| T::lit(v));
+                f(b.turn_angle_deg(s)) - f(a.turn_angle_deg(s))
+            })
+            .collect();
+        let (sin, cos) = diffs.iter().fold((0.0, 0.0), |(s, c), d| {
+            (s + d.to_radians().sin(), c + d.to_radians().cos())
+        });
+        let mean = f64::atan2(sin, cos).to_degrees();
+        let heading = diffs
+            .iter()
+            .map(|d| ((d - mean + 540.0).rem_euclid(360.0) - 180.0).abs())
+            .fold(0.0, f64::max);
+        Self {
+            centre: in_plane.norm() / rho,
+            field: (f(b.plane_strength()) - rho).abs() / rho,
+            m: (mb - ma).norm() / ma.norm(),
+            heading,
+        }
+    }
+
+    /// The larger of each part.
+    pub fn max(self, o: Self) -> Self {
+        Self {
+            centre: self.centre.max(o.centre),
+            field: self.field.max(o.field),
+            m: self.m.max(o.m),
+            heading: self.heading.max(o.heading),
+        }
+    }
+
+    /// Within 1 % of the field (and the heading error that makes).
+    pub fn within_one_percent(&self) -> bool {
+        self.centre < 0.01
+            && self.field < 0.01
+            && self.m < 0.01
+            && self.heading < HEADING_OF_ONE_PERCENT
+    }
+}
+
+impl std::fmt::Display for Shift {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "centre {:.3} %, field {:.3} %, K'K {:.3} %, heading {:.3} deg",
+            100.0 * self.centre,
+            100.0 * self.field,
+            100.0 * self.m,
+            self.heading
+        )
+    }
+}
+
+/// A planar refusal's cause: its variant (the shared refusals by theirs),
+/// e.g. `ShortArc`, `TooManyOutliers`.
+pub fn cause(e: &Error) -> String {
+    let text = match e {
+        Error::Fit(inner) => format!("{inner:?}"),
+        other => format!("{other:?}"),
+    };
+    text.split([' ', '{', '(']).next().unwrap_or("").to_owned()
 }

@@ -14,8 +14,10 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use host_tests::contamination::refusal_name;
+use host_tests::planar::{cause, robot_log, robot_plane_field, Shift};
 use host_tests::real::{read_csv_fields, read_xyz};
 use host_tests::sim::{self, Rng};
+use mag_cal_core::planar::{self as planar, calibrate_planar, PlanarConfig, PlanarFit};
 use mag_cal_core::{calibrate, Config, Error, Fit};
 use nalgebra::{Matrix3, Vector3};
 
@@ -35,6 +37,13 @@ const SIM_TURNS: f64 = 6.0;
 const SIM_FIELD: f64 = 400.0;
 /// Largest hard-iron component of a simulated recording, counts.
 const SIM_OFFSET: f64 = 300.0;
+/// The robot log's still rows at each end, turn rows, turns, radial
+/// noise of the turn (share of the field in the plane), and seed.
+const ROBOT: (usize, usize, f64, f64, u64) = (120, 200, 1.1, 0.019, 1);
+/// Noise of the robot log's still rows, share of the field in the plane.
+const ROBOT_STILL_NOISE: [f64; 3] = [0.0015, 0.01, 0.03];
+/// Still rows in the middle of `planar_243.txt`, in multiples of its rows.
+const BETWEEN_MULTIPLES: [usize; 2] = [1, 10];
 
 /// A recording: its label, its rows, and one count (the smallest step
 /// between two values of an axis: the sensor's resolution).
@@ -127,12 +136,29 @@ fn with_still_ends(rec: &Recording, k: usize, sigma: f64, rng: &mut Rng) -> Vec<
     let (Some(&first), Some(&last)) = (rec.rows.first(), rec.rows.last()) else {
         return rec.rows.clone();
     };
-    let mut jitter =
-        |p: [f64; 3]| p.map(|v| v + rec.count * (sigma * rng.normal() / rec.count).round());
-    let mut out: Vec<[f64; 3]> = (0..k).map(|_| jitter(first)).collect();
+    let mut out: Vec<[f64; 3]> = (0..k).map(|_| jitter(rec, first, sigma, rng)).collect();
     out.extend_from_slice(&rec.rows);
-    out.extend((0..k).map(|_| jitter(last)));
+    out.extend((0..k).map(|_| jitter(rec, last, sigma, rng)));
     out
+}
+
+/// The first half of the rows, `k` rows of the middle row (the first of
+/// the second half) with noise as in [`with_still_ends`], the second half.
+fn with_still_between(rec: &Recording, k: usize, sigma: f64, rng: &mut Rng) -> Vec<[f64; 3]> {
+    let half = rec.rows.len() / 2;
+    let Some(&middle) = rec.rows.get(half) else {
+        return rec.rows.clone();
+    };
+    let mut out = rec.rows[..half].to_vec();
+    out.extend((0..k).map(|_| jitter(rec, middle, sigma, rng)));
+    out.extend_from_slice(&rec.rows[half..]);
+    out
+}
+
+/// Row `p` with Gaussian noise `sigma` per axis, each value rounded to a
+/// whole number of counts away from `p`.
+fn jitter(rec: &Recording, p: [f64; 3], sigma: f64, rng: &mut Rng) -> [f64; 3] {
+    p.map(|v| v + rec.count * (sigma * rng.normal() / rec.count).round())
 }
 
 /// The shift of `fit` from `base`: hard iron `|db| / rho`, field strength
@@ -264,6 +290,184 @@ fn rows_of(rec: &Recording, seed: u64, out: &mut String) {
     }
 }
 
+/// The planar fit's result.
+type PlanarResult = Result<PlanarFit<f64>, planar::Error>;
+
+/// `config` without the still rule.
+fn without_rule(config: &PlanarConfig) -> PlanarConfig {
+    let mut c = *config;
+    c.still = false;
+    c
+}
+
+fn planar_verdict(r: &PlanarResult) -> String {
+    match r {
+        Ok(_) => "accepted".into(),
+        Err(e) => cause(e),
+    }
+}
+
+/// The rows set aside by an accepted planar fit, `-` for a refusal.
+fn planar_set_aside(r: &PlanarResult) -> String {
+    r.as_ref()
+        .map_or("-".into(), |f| f.report.dwell.to_string())
+}
+
+/// The planar shift of `fit` from `base` (heading over `motion`, the
+/// recording's rows): centre, plane field and `K^T K` in %, heading in
+/// degrees; `-` without both fits.
+fn planar_shifts(base: &PlanarResult, fit: &PlanarResult, motion: &[[f64; 3]]) -> [String; 4] {
+    match (base, fit) {
+        (Ok(b), Ok(f)) => {
+            let s = Shift::of(b, f, motion);
+            [
+                format!("{:.3}", 100.0 * s.centre),
+                format!("{:.3}", 100.0 * s.field),
+                format!("{:.3}", 100.0 * s.m),
+                format!("{:.3}", s.heading),
+            ]
+        }
+        _ => std::array::from_fn(|_| "-".into()),
+    }
+}
+
+/// A planar recording without still rows: its label, its rows, its
+/// configuration and its fit.
+struct PlanarCase<'a> {
+    label: &'a str,
+    motion: &'a [[f64; 3]],
+    config: &'a PlanarConfig,
+    base: &'a PlanarResult,
+}
+
+/// One row of the planar table: `rows` (the recording's rows with still
+/// rows) against the fit of the recording alone, with the rule and without
+/// it. The worst shift of an accepted row goes into `worst`.
+fn planar_row(
+    case: &PlanarCase,
+    (still, noise): (&str, &str),
+    rows: &[[f64; 3]],
+    worst: &mut Shift,
+    out: &mut String,
+) {
+    let PlanarCase {
+        label,
+        motion,
+        config,
+        base,
+    } = *case;
+    let fit = calibrate_planar::<f64, _>(rows, config);
+    let no_rule = calibrate_planar::<f64, _>(rows, &without_rule(config));
+    if let (Ok(b), Ok(f)) = (base, &fit) {
+        *worst = worst.max(Shift::of(b, f, motion));
+    }
+    let [c, rho, m, h] = planar_shifts(base, &fit, motion);
+    let without = match (base, &no_rule) {
+        (Ok(_), Ok(_)) => planar_shifts(base, &no_rule, motion).join(" / "),
+        _ => planar_verdict(&no_rule),
+    };
+    let _ = writeln!(
+        out,
+        "| {label} | {still} | {noise} | {} | {} | {} | {c} | {rho} | {m} | {h} | {without} |",
+        rows.len(),
+        planar_verdict(&fit),
+        planar_set_aside(&fit),
+    );
+}
+
+/// The reference row of a planar recording: as it is, the rule against no
+/// rule.
+fn planar_reference(
+    label: &str,
+    still: &str,
+    rows: &[[f64; 3]],
+    config: &PlanarConfig,
+    out: &mut String,
+) {
+    let base = calibrate_planar::<f64, _>(rows, config);
+    let without = calibrate_planar::<f64, _>(rows, &without_rule(config));
+    let [c, rho, m, h] = planar_shifts(&without, &base, rows);
+    let _ = writeln!(
+        out,
+        "| {label} | {still} | - | {} | {} | {} | {c} | {rho} | {m} | {h} | {} (the reference) |",
+        rows.len(),
+        planar_verdict(&base),
+        planar_set_aside(&base),
+        planar_verdict(&without),
+    );
+}
+
+/// The planar table's rows: the robot log, then `planar_243.txt`; and the
+/// worst shift over the accepted rows with still rows.
+fn planar_rows(out: &mut String) -> Shift {
+    let mut worst = Shift::default();
+    let (still, turn, turns, turn_noise, seed) = ROBOT;
+    let config = PlanarConfig::default();
+    let field = robot_plane_field();
+    let label = format!("robot log (simulated, seed {seed})");
+    for (i, &still_noise) in ROBOT_STILL_NOISE.iter().enumerate() {
+        let (rows, range) = robot_log(still, turn, (still_noise, turn_noise), turns, seed);
+        let motion = &rows[range];
+        if i == 0 {
+            planar_reference(&label, "0 (the turn alone)", motion, &config, out);
+        }
+        let base = calibrate_planar::<f64, _>(motion, &config);
+        let case = PlanarCase {
+            label: &label,
+            motion,
+            config: &config,
+            base: &base,
+        };
+        let noise = format!("{} % ({})", 100.0 * still_noise, sig3(still_noise * field));
+        let still = format!("{still} at each end");
+        planar_row(&case, (&still, &noise), &rows, &mut worst, out);
+    }
+    let rec = recording("planar_243.txt", read_xyz("planar_243.txt"));
+    let config = PlanarConfig::with_up([0.0, 0.0, 1.0]);
+    let n = rec.rows.len();
+    planar_reference(&rec.label, "0", &rec.rows, &config, out);
+    let base = calibrate_planar::<f64, _>(&rec.rows, &config);
+    let field = base
+        .as_ref()
+        .unwrap_or_else(|e| panic!("planar_243.txt alone: {e}"))
+        .calibration
+        .plane_strength();
+    let case = PlanarCase {
+        label: &rec.label,
+        motion: &rec.rows,
+        config: &config,
+        base: &base,
+    };
+    let seed = 0x5712_0000;
+    for noise in [StillNoise::Count, StillNoise::Share] {
+        let (sigma, label) = match noise {
+            StillNoise::Count => (rec.count, format!("1 count ({})", sig3(rec.count))),
+            StillNoise::Share => (
+                STILL_SHARE * field,
+                format!("{} % ({})", 100.0 * STILL_SHARE, sig3(STILL_SHARE * field)),
+            ),
+        };
+        let share = u64::from(matches!(noise, StillNoise::Share));
+        for mult in MULTIPLES.into_iter().filter(|&m| m > 0) {
+            let k = mult * n;
+            let mut rng = Rng(seed ^ ((mult as u64) << 8) ^ share);
+            let rows = with_still_ends(&rec, k, sigma, &mut rng);
+            let still = format!("{mult}x ({k}) at each end");
+            planar_row(&case, (&still, &label), &rows, &mut worst, out);
+        }
+    }
+    let sigma = STILL_SHARE * field;
+    let label = format!("{} % ({})", 100.0 * STILL_SHARE, sig3(sigma));
+    for mult in BETWEEN_MULTIPLES {
+        let k = mult * n;
+        let mut rng = Rng(seed ^ ((mult as u64) << 8) ^ 0x10);
+        let rows = with_still_between(&rec, k, sigma, &mut rng);
+        let still = format!("{mult}x ({k}) between");
+        planar_row(&case, (&still, &label), &rows, &mut worst, out);
+    }
+    worst
+}
+
 fn main() -> ExitCode {
     let write = match host_tests::sections::write_target("still-table") {
         Ok(write) => write,
@@ -280,7 +484,14 @@ fn main() -> ExitCode {
         rows_of(&rec, 0x5711_1000 + i as u64, &mut table);
         eprintln!("[{:5.1} s] {}", start.elapsed().as_secs_f64(), rec.label);
     }
+    let mut planar_table = String::new();
+    let worst = planar_rows(&mut planar_table);
+    eprintln!(
+        "[{:5.1} s] planar; worst accepted: {worst}",
+        start.elapsed().as_secs_f64()
+    );
     let elapsed = start.elapsed().as_secs_f64();
+    let (still, turn, robot_turns, turn_noise, seed) = ROBOT;
     let doc = format!(
         "## Still periods\n\n\
          Written by `cargo run --release -p host-tests --bin still-table -- --write docs/results.md` \
@@ -304,7 +515,30 @@ fn main() -> ExitCode {
          distortion, hard iron up to {offset} counts an axis, noise {noises} of the field per \
          axis.\n\n\
          | recording | still rows at each end | still noise | rows | verdict | set aside | b % | field % | M % | without the rule |\n\
-         |---|---|---|---:|---|---:|---:|---:|---:|---|\n{table}",
+         |---|---|---|---:|---|---:|---:|---:|---:|---|\n{table}\n\
+         ### Planar (`calibrate_planar`)\n\n\
+         The same for the planar (heading-only) fit, `mag_cal_core::planar::calibrate_planar` \
+         (`f64`; asserted by `host-tests/tests/still_planar.rs`). The robot log of the issue \
+         (\"still, one slow turn, still\", refused without the rule as too many outliers), \
+         simulated (`host_tests::planar::robot_log`): {still} still rows, {turn} rows of {robot_turns} \
+         slow turns at radial noise {turn_pct} % of the field in the plane, {still} still rows, \
+         seed {seed}, the still rows with noise {robot_noises} of the field in the plane per axis \
+         (in brackets: counts), with `PlanarConfig::default()`; its reference is the turn alone \
+         (0 still). `planar_243.txt` (`shared/data/real/`, read in place, \
+         `PlanarConfig::with_up([0.0, 0.0, 1.0])`) with its first row repeated before it and its \
+         last after it, {multiples_planar} times its rows at each end, noise of one count (its \
+         smallest step) or {share} % of its field in the plane, rounded to whole counts as \
+         above; and the same {share} % still rows in its middle (one still period of {between} \
+         times its rows, the middle row repeated). Shifts from the fit without the still rows \
+         (the turn alone; `planar_243.txt` as it is): the centre within the plane and the field \
+         in the plane (in % of that fit's field in the plane), `K'K` (`K` the 2x3 matrix, in % \
+         of its norm), and the largest heading change over the recording's rows (deg, their \
+         mean change removed: one alignment), as `Shift` in `host_tests::planar`. The rows \
+         set aside are `PlanarReport::dwell`. The reference rows compare the fit with the rule \
+         against the fit without it (`still: false`); the last column gives the same rows \
+         without the rule (centre / field / K'K in %, heading in deg, or its refusal).\n\n\
+         | recording | still rows | still noise | rows | verdict | set aside | centre % | plane field % | K'K % | heading deg | without the rule |\n\
+         |---|---|---|---:|---|---:|---:|---:|---:|---:|---|\n{planar_table}",
         multiples = MULTIPLES
             .iter()
             .map(|m| m.to_string())
@@ -320,6 +554,22 @@ fn main() -> ExitCode {
             .map(|s| format!("{} %", 100.0 * s))
             .collect::<Vec<_>>()
             .join(", "),
+        turn_pct = 100.0 * turn_noise,
+        robot_noises = ROBOT_STILL_NOISE
+            .iter()
+            .map(|s| format!("{} %", 100.0 * s))
+            .collect::<Vec<_>>()
+            .join(", "),
+        multiples_planar = MULTIPLES[1..]
+            .iter()
+            .map(|m| m.to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        between = BETWEEN_MULTIPLES
+            .iter()
+            .map(|m| m.to_string())
+            .collect::<Vec<_>>()
+            .join(" and "),
     );
     host_tests::sections::publish(&doc, SECTION, write.as_deref())
 }
