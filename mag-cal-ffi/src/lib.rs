@@ -558,6 +558,26 @@ pub unsafe extern "C" fn magcal_refusal_message(
     text.total
 }
 
+/// The value C stored in a `MagcalStatus` field, as an integer of the
+/// enum's size: an `int` on most targets, one byte on `arm-none-eabi`
+/// (short enums, as GCC and Rust lay them out there: reading an `int`
+/// took the three padding bytes after it, which a struct copy may leave
+/// anything in).
+///
+/// # Safety
+/// `status` must be aligned and readable.
+unsafe fn read_status(status: *const MagcalStatus) -> i32 {
+    // SAFETY: the caller's word; the integer has the enum's size and
+    // alignment, and is valid for any bits.
+    unsafe {
+        match size_of::<MagcalStatus>() {
+            1 => i32::from(status.cast::<u8>().read()),
+            2 => i32::from(status.cast::<u16>().read()),
+            _ => status.cast::<i32>().read(),
+        }
+    }
+}
+
 /// The status of `*refusal` as an integer (C may have stored any value in
 /// the enum) and, when it is a status, the refusal; `None` for a null or
 /// misaligned pointer.
@@ -568,11 +588,11 @@ unsafe fn read_refusal(refusal: *const MagcalRefusal) -> Option<(i32, Option<Mag
     if refusal.is_null() || !refusal.is_aligned() {
         return None;
     }
-    // SAFETY: as documented; the enum is read as its `int`, and every
-    // other field is valid for any bits.
+    // SAFETY: as documented; the enum is read as the integer C stores it
+    // in ([`read_status`]), and every other field is valid for any bits.
     let (raw, figure, limit, count, of) = unsafe {
         (
-            core::ptr::addr_of!((*refusal).status).cast::<i32>().read(),
+            read_status(core::ptr::addr_of!((*refusal).status)),
             core::ptr::addr_of!((*refusal).figure).read(),
             core::ptr::addr_of!((*refusal).limit).read(),
             core::ptr::addr_of!((*refusal).count).read(),
