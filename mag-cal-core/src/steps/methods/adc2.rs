@@ -14,9 +14,9 @@
 //! normal equations `Theta G = Q`: `Theta = Q G^-1`, a 4x4 Cholesky solve
 //! on the statistics, no iteration and no further pass over the samples.
 //! The batch fit, the background calibrator and iterated ADC2 share this
-//! one solve. (BFGS with the exact line search, the core's solver until
-//! issue 35, reached the same minimiser in 2-4 iterations; the tests keep
-//! that comparison where BFGS is still compiled, for ADC1 and subMLE.)
+//! one solve. BFGS with the exact line search (compiled for ADC1 and
+//! subMLE) reaches the same minimiser in 2-4 iterations; a test compares
+//! the two where it is compiled.
 
 use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, Vector3};
 
@@ -188,9 +188,9 @@ mod tests {
         }
     }
 
-    /// Where BFGS is still compiled (ADC1, subMLE), it reaches the closed
-    /// form on the ADC2 objective, with the exact line search, in a handful
-    /// of iterations: the batch fit's solver until issue 35.
+    /// Where BFGS is compiled (ADC1, subMLE), it reaches the closed form
+    /// on the ADC2 objective, with the exact line search, in a handful of
+    /// iterations.
     #[cfg(any(feature = "adc1", feature = "submle"))]
     #[test]
     fn bfgs_on_the_adc2_objective_reaches_the_closed_form() {
