@@ -274,6 +274,13 @@ pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 /// The robust standard deviation `1.4826 median|r|` of the residuals
 /// counted in `hist`, floored at `1024 eps` (below it rounding, not noise,
 /// sets the residuals), or `None` when nothing was counted.
+///
+/// Out of line with outlier handling, one copy for its four callers (the
+/// final pass, the measured pass, the robust LS's weights and its
+/// scoring): LS9 + ADC2 32 164 -> 32 064 bytes of flash; inlined
+/// without it, its one caller there the final pass (out of line 18 988
+/// -> 19 032, `bash bench.sh flash`).
+#[cfg_attr(feature = "robust", inline(never))]
 pub(crate) fn robust_sigma<T: Real>(hist: &LogHistogram) -> Option<T> {
     let m = hist.quantile(T::lit(0.5))?;
     Some(larger(
