@@ -13,7 +13,7 @@ use crate::tuning::{
 };
 use nalgebra::{Matrix3, SMatrix};
 
-use crate::numerics::linalg::{columns_of, larger, min_max, sym_eigenvalues, tridiagonal};
+use crate::numerics::linalg::{columns_of, eigen_range, larger, tridiagonal};
 use crate::steps::final_pass::FinalPass;
 use crate::steps::moments::Moments;
 use crate::{Error, Figure, Real};
@@ -523,7 +523,7 @@ pub(crate) fn flatness<T: Real>(m: &Moments<T>, count: usize) -> Result<T, Error
             *c = s / n - mean[i] * mean[j];
         }
     }
-    let (min, max) = min_max(&sym_eigenvalues(&cov)?);
+    let (min, max) = eigen_range(&cov)?;
     if !(max > T::zero()) {
         return Err(Error::AllSamplesEqual);
     }
@@ -625,7 +625,7 @@ fn kth_eigenvalue<T: Real>(d: &[T; 10], e: &[T; 10], k: usize, top: T, floor: T)
 
 /// Condition number of `M = W^2` for a symmetric positive definite `W`.
 pub(crate) fn distortion<T: Real>(w: &Matrix3<T>) -> Result<T, Error> {
-    let (lo, hi) = min_max(&sym_eigenvalues(&columns_of(w))?);
+    let (lo, hi) = eigen_range(&columns_of(w))?;
     if !(lo > T::zero()) {
         return Err(Error::NotAnEllipsoid);
     }

@@ -20,9 +20,7 @@
 
 use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, Vector3};
 
-use crate::numerics::linalg::{
-    cholesky, cholesky_solve, columns_of, min_max, sym_eigenvalues, sym_inv_sqrt,
-};
+use crate::numerics::linalg::{cholesky, cholesky_solve, columns_of, eigen_range, sym_inv_sqrt};
 use crate::sample::Sample;
 use crate::steps::artificial::Stats;
 use crate::steps::ellipsoid::Ellipsoid;
@@ -54,7 +52,7 @@ pub struct Adc2Solution<T: Real> {
 /// is not unique (all `h_i` on one plane through the centre, or equal).
 /// Weak-but-regular geometry is judged by the quality checks, not here.
 pub(crate) fn check_gram<T: Real>(g: &Matrix4<T>) -> Result<(), Error> {
-    let (lo, hi) = min_max(&sym_eigenvalues(&columns_of(g))?);
+    let (lo, hi) = eigen_range(&columns_of(g))?;
     if lo > hi.abs() * T::EPSILON * T::lit(64.0) {
         Ok(())
     } else {
