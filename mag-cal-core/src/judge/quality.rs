@@ -462,9 +462,10 @@ pub(crate) fn judge<T: Real>(f: &Figures<T>, th: &Thresholds) -> Result<Warnings
 /// [`judge`] refuses them, that refusal is the answer, else `e`.
 ///
 /// Out of line with outlier handling, one copy for its five callers
-/// (`robust_start` twice, `plain_start`, `method_step`, `finish`): LS9 +
-/// ADC2 32 416 -> 32 368 bytes of flash; inlined without it, where out
-/// of line it took 8 bytes more (19 068 -> 19 076, `bash bench.sh flash`).
+/// (`robust_start` twice, `plain_start`, `method_step`, `finish`):
+/// inlined, LS9 + ADC2 took 28 bytes of flash more (31 684 -> 31 712).
+/// Inlined without it, where out of line it took 4 bytes more (18 712 ->
+/// 18 716, `bash bench.sh flash`).
 #[cfg_attr(feature = "robust", inline(never))]
 pub(crate) fn judge_failure<T: Real>(f: &Figures<T>, th: &Thresholds, e: Error) -> Error {
     match judge(f, th) {

@@ -201,8 +201,8 @@ pub(super) fn finish<T: Real, S: Sample>(
 
 /// The clip levels of the rules, `None` for an axis's side without one
 /// (`T::MAX`). A loop over the flattened array: nested `array::map`s of
-/// `Option::filter` took 52 bytes of flash more (LS9 + ADC2 32 316 ->
-/// 32 368, `bash bench.sh flash`).
+/// `Option::filter` took 44 bytes of flash more (LS9 + ADC2 31 684 ->
+/// 31 728, `bash bench.sh flash`).
 #[cfg(feature = "robust")]
 fn clip_levels<T: Real>(clip: &[[T; 2]; 3]) -> [[Option<T>; 2]; 3] {
     let mut out = [[None; 2]; 3];

@@ -34,9 +34,9 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     }
     let mut figures = Figures::new(scan, config, false);
     // The start and the estimate are read in place, in their `Result`s:
-    // taken out by `?`, each was copied into a local of its own (LS9 +
-    // ADC2 32 064 -> 31 948 bytes of flash, without `robust` 18 988 ->
-    // 18 848, `bash bench.sh flash`).
+    // taken out by `?`, each was copied into a local of its own, 116 bytes
+    // of flash more (LS9 + ADC2 31 684 -> 31 800; without `robust` 140,
+    // 18 712 -> 18 852, `bash bench.sh flash`).
     let start = plain_start(samples, config, scan, ls_solve, &mut figures);
     let start = match &start {
         Ok(s) => s,

@@ -63,10 +63,9 @@ pub(super) fn best_start<T: Real, S: Sample>(
 ) -> Option<usize> {
     // The screening does not depend on the start: made once for all.
     // Read in place in its `Result`, as the screenings, robust LS fits,
-    // starts and estimates of this path (and the plain path's): taken out
-    // by `?` or a `match` by value, each was copied into a local of its
-    // own (LS9 + ADC2 31 948 -> 31 796 bytes of flash, `bash bench.sh
-    // flash`).
+    // starts and estimates of this path: taken out by `?` or a `match` by
+    // value, each was copied into a local of its own, 152 bytes of flash
+    // more (LS9 + ADC2 31 684 -> 31 836, `bash bench.sh flash`).
     let screened = screen::screen(samples, scan);
     let Ok(screening) = &screened else {
         return None;

@@ -277,9 +277,10 @@ pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 ///
 /// Out of line with outlier handling, one copy for its four callers (the
 /// final pass, the measured pass, the robust LS's weights and its
-/// scoring): LS9 + ADC2 32 164 -> 32 064 bytes of flash; inlined
-/// without it, its one caller there the final pass (out of line 18 988
-/// -> 19 032, `bash bench.sh flash`).
+/// scoring): inlined, LS9 + ADC2 took 100 bytes of flash more (31 684 ->
+/// 31 784). Inlined without it, where its one caller is the final pass
+/// (out of line it took 40 bytes more: 18 712 -> 18 752, `bash bench.sh
+/// flash`).
 #[cfg_attr(feature = "robust", inline(never))]
 pub(crate) fn robust_sigma<T: Real>(hist: &LogHistogram) -> Option<T> {
     let m = hist.quantile(T::lit(0.5))?;
