@@ -229,6 +229,23 @@ int main(int argc, char **argv) {
     if (s == MAGCAL_STATUS_OK || r.refusal.status != s || len >= sizeof why ||
         !(r.refusal.figure > r.refusal.limit))
         failed = 1;
+    /* The same refusal copied field by field into bytes that were not
+     * zero: the library reads the status as the enum's own size (one byte
+     * on arm-none-eabi, with three bytes of padding after it). */
+    MagcalRefusal copy;
+    memset(&copy, 0xA5, sizeof copy);
+    copy.status = r.refusal.status;
+    copy.figure = r.refusal.figure;
+    copy.limit = r.refusal.limit;
+    copy.count = r.refusal.count;
+    copy.of = r.refusal.of;
+    char again[256];
+    magcal_refusal_message(&copy, again, sizeof again);
+    if (strcmp(again, why) != 0 ||
+        strcmp(magcal_refusal_name(&copy), magcal_refusal_name(&r.refusal)) != 0) {
+        printf("a refusal copied over padding: '%s' (%s)\n", again, magcal_refusal_name(&copy));
+        failed = 1;
+    }
 
     /* Still periods: the log lying still before and after its turns. The
      * rows in a ball about each still position are set aside (no outliers), and

@@ -196,7 +196,24 @@ pub(crate) fn sym_eigenvalues<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<
     Ok(values)
 }
 
-/// Smallest and largest of some values.
+/// The smallest and the largest eigenvalue of a symmetric matrix
+/// ([`sym_eigenvalues`], [`min_max`]): every caller of the eigenvalues
+/// alone wants no more. Out of line, the eigenvalues never leave it: with
+/// `min_max(&sym_eigenvalues(m)?)` at each caller (flatness, distortion,
+/// coverage and Gram condition, the Gram check) LS9 + ADC2 took 112
+/// bytes of flash more (31 684 -> 31 796; without `robust` 18 712 ->
+/// 18 848, `bash bench.sh flash`).
+#[inline(never)]
+pub(crate) fn eigen_range<T: Real, const N: usize>(m: &Mat<T, N>) -> Result<(T, T), Error> {
+    Ok(min_max(&sym_eigenvalues(m)?))
+}
+
+/// Smallest and largest of some values. Out of line, one copy for 3 and
+/// one for 4 values in LS9 + ADC2 ([`eigen_range`],
+/// [`positive_definite_eigen`]): inlined, it took as much flash (31 684 bytes)
+/// and 16 bytes more without `robust` (18 712 -> 18 728, `bash bench.sh
+/// flash`).
+#[inline(never)]
 pub(crate) fn min_max<T: Real, const N: usize>(values: &[T; N]) -> (T, T) {
     let first = values.first().copied().unwrap_or_else(T::zero);
     let (mut lo, mut hi) = (first, first);

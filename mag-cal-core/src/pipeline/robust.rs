@@ -62,12 +62,19 @@ pub(super) fn best_start<T: Real, S: Sample>(
     passes: &mut u32,
 ) -> Option<usize> {
     // The screening does not depend on the start: made once for all.
-    let screening = screen::screen(samples, scan).ok()?;
+    // Read in place in its `Result`, as the screenings, robust LS fits,
+    // starts and estimates of this path: taken out by `?` or a `match` by
+    // value, each was copied into a local of its own, 152 bytes of flash
+    // more (LS9 + ADC2 31 684 -> 31 836, `bash bench.sh flash`).
+    let screened = screen::screen(samples, scan);
+    let Ok(screening) = &screened else {
+        return None;
+    };
     *passes = passes.saturating_add(screening.passes);
     // The start that scores best, and its score.
     let mut best: Option<(usize, T)> = None;
     for k in 0..=crate::tuning::STARTS {
-        let (score, made) = robust_score(samples, config, scan, &screening, ls_solve, k);
+        let (score, made) = robust_score(samples, config, scan, screening, ls_solve, k);
         *passes = passes.saturating_add(made);
         if let Some(s) = score.filter(|&s| best.is_none_or(|(_, b)| s < b)) {
             best = Some((k, s));
@@ -117,10 +124,14 @@ pub(super) fn robust_attempt<T: Real, S: Sample>(
         &mut figures,
         &mut runs,
         k,
-    )?;
+    );
+    let start = match &mut start {
+        Ok(s) => s,
+        Err(e) => return Err(*e),
+    };
     start.robust_passes = start.robust_passes.saturating_add(before);
     outcome.passes = start.robust_passes;
-    let fit = robust_rest(samples, config, &start, step, &mut figures);
+    let fit = robust_rest(samples, config, start, step, &mut figures);
     let th = &config.thresholds;
     outcome.doubt = figures
         .lack_of_fit
@@ -149,7 +160,7 @@ pub(super) fn robust_score<T: Real, S: Sample>(
 ) -> (Option<T>, u32) {
     let mut figures = Figures::new(scan, config, true);
     let mut runs = runs::Runs::NONE;
-    let Ok(start) = robust_start(
+    let started = robust_start(
         samples,
         config,
         scan,
@@ -158,7 +169,8 @@ pub(super) fn robust_score<T: Real, S: Sample>(
         &mut figures,
         &mut runs,
         k,
-    ) else {
+    );
+    let Ok(start) = &started else {
         return (None, 0);
     };
     let every = screen::stride(figures.valid);
@@ -188,8 +200,12 @@ pub(super) fn robust_rest<T: Real, S: Sample>(
     step: methods::Step<T, S>,
     figures: &mut Figures<T>,
 ) -> Result<Fit<T>, Error> {
-    let est = method_step(samples, config, start, step, figures)?;
-    finish_fit(samples, config, start, &est, figures)
+    let est = method_step(samples, config, start, step, figures);
+    let est = match &est {
+        Ok(e) => e,
+        Err(e) => return Err(*e),
+    };
+    finish_fit(samples, config, start, est, figures)
 }
 
 /// [`finish()`] for the robust path, which needs only the fit. Out of line:
@@ -228,8 +244,9 @@ pub(super) fn robust_start<'r, T: Real, S: Sample>(
     let (screening, passes) = match screened {
         Some(s) => (s, 0),
         None => {
-            own = match screen::screen(samples, scan) {
-                Ok(s) => s,
+            own = screen::screen(samples, scan);
+            match &own {
+                Ok(s) => (s, s.passes),
                 Err(screen::Unscreened::AllEqual) => return Err(Error::AllSamplesEqual),
                 Err(screen::Unscreened::Crowded) => {
                     // No sphere at all: judged by the crude sphere's fit
@@ -237,8 +254,7 @@ pub(super) fn robust_start<'r, T: Real, S: Sample>(
                     figures.fit_error = Some(T::lit(f64::INFINITY));
                     return Err(judge_failure(figures, config, Error::AllSamplesEqual));
                 }
-            };
-            (&own, own.passes)
+            }
         }
     };
     start_from(
@@ -270,7 +286,7 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
         screen: Some(screening.ball),
         dwell,
     };
-    let fitted = match refit::robust_ls(
+    let fitted = refit::robust_ls(
         samples,
         screening,
         &gate,
@@ -278,10 +294,12 @@ pub(super) fn start_from<'r, T: Real, S: Sample>(
         runs,
         window,
         &mut figures.flatness,
-    ) {
+    );
+    let fitted = match &fitted {
         Ok(f) => f,
-        Err(refit::Failure::Flat(e)) => return Err(e),
+        Err(refit::Failure::Flat(e)) => return Err(*e),
         Err(refit::Failure::Fit(e)) => {
+            let e = *e;
             // No ellipsoid at all: judged by the crude sphere's fit error.
             figures.fit_error = Some(screening.sphere_error);
             return Err(judge_failure(figures, config, e));

@@ -7,7 +7,7 @@ use crate::tuning::{LOF_CELLS, LOF_MIN_ROWS, LOF_SIGNIFICANCE};
 use nalgebra::{Matrix3, Vector3};
 
 use crate::numerics::histogram::LogHistogram;
-use crate::numerics::linalg::{larger, min_max, sym_eigenvalues};
+use crate::numerics::linalg::{eigen_range, larger};
 use crate::robust::runs::Runs;
 use crate::steps::artificial::Stats;
 use crate::steps::moments::BLOCK;
@@ -299,8 +299,8 @@ fn direction_figures<T: Real>(d: &DirectionSums<T>) -> Result<(T, T), Error> {
         gi[3] = mean[i];
     }
     g[3] = [mean[0], mean[1], mean[2], T::one()];
-    let (coverage, _) = min_max(&sym_eigenvalues(&cov)?);
-    let (gmin, gmax) = min_max(&sym_eigenvalues(&g)?);
+    let (coverage, _) = eigen_range(&cov)?;
+    let (gmin, gmax) = eigen_range(&g)?;
     let gram_condition = if gmin > T::zero() {
         gmax / gmin
     } else {

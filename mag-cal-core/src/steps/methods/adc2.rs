@@ -14,15 +14,13 @@
 //! normal equations `Theta G = Q`: `Theta = Q G^-1`, a 4x4 Cholesky solve
 //! on the statistics, no iteration and no further pass over the samples.
 //! The batch fit, the background calibrator and iterated ADC2 share this
-//! one solve. (BFGS with the exact line search, the core's solver until
-//! issue 35, reached the same minimiser in 2-4 iterations; the tests keep
-//! that comparison where BFGS is still compiled, for ADC1 and subMLE.)
+//! one solve. BFGS with the exact line search (compiled for ADC1 and
+//! subMLE) reaches the same minimiser in 2-4 iterations; a test compares
+//! the two where it is compiled.
 
 use nalgebra::{ArrayStorage, Matrix3, Matrix3x4, Matrix4, Vector3};
 
-use crate::numerics::linalg::{
-    cholesky, cholesky_solve, columns_of, min_max, sym_eigenvalues, sym_inv_sqrt,
-};
+use crate::numerics::linalg::{cholesky, cholesky_solve, columns_of, eigen_range, sym_inv_sqrt};
 use crate::sample::Sample;
 use crate::steps::artificial::Stats;
 use crate::steps::ellipsoid::Ellipsoid;
@@ -54,7 +52,7 @@ pub struct Adc2Solution<T: Real> {
 /// is not unique (all `h_i` on one plane through the centre, or equal).
 /// Weak-but-regular geometry is judged by the quality checks, not here.
 pub(crate) fn check_gram<T: Real>(g: &Matrix4<T>) -> Result<(), Error> {
-    let (lo, hi) = min_max(&sym_eigenvalues(&columns_of(g))?);
+    let (lo, hi) = eigen_range(&columns_of(g))?;
     if lo > hi.abs() * T::EPSILON * T::lit(64.0) {
         Ok(())
     } else {
@@ -188,9 +186,9 @@ mod tests {
         }
     }
 
-    /// Where BFGS is still compiled (ADC1, subMLE), it reaches the closed
-    /// form on the ADC2 objective, with the exact line search, in a handful
-    /// of iterations: the batch fit's solver until issue 35.
+    /// Where BFGS is compiled (ADC1, subMLE), it reaches the closed form
+    /// on the ADC2 objective, with the exact line search, in a handful of
+    /// iterations.
     #[cfg(any(feature = "adc1", feature = "submle"))]
     #[test]
     fn bfgs_on_the_adc2_objective_reaches_the_closed_form() {

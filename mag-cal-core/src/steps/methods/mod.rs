@@ -274,6 +274,14 @@ pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 /// The robust standard deviation `1.4826 median|r|` of the residuals
 /// counted in `hist`, floored at `1024 eps` (below it rounding, not noise,
 /// sets the residuals), or `None` when nothing was counted.
+///
+/// Out of line with outlier handling, one copy for its four callers (the
+/// final pass, the measured pass, the robust LS's weights and its
+/// scoring): inlined, LS9 + ADC2 took 100 bytes of flash more (31 684 ->
+/// 31 784). Inlined without it, where its one caller is the final pass
+/// (out of line it took 40 bytes more: 18 712 -> 18 752, `bash bench.sh
+/// flash`).
+#[cfg_attr(feature = "robust", inline(never))]
 pub(crate) fn robust_sigma<T: Real>(hist: &LogHistogram) -> Option<T> {
     let m = hist.quantile(T::lit(0.5))?;
     Some(larger(
