@@ -68,8 +68,15 @@ pub(super) fn plain_path<T: Real, S: Sample>(
             // (about 120 instructions a row on a Cortex-M4F).
             return Err(NOT_TAKEN);
         }
-        let done = finish(samples, config, start, est, &mut figures)?;
-        let fit = done.fit;
+        // The finished fit too, read in place: moved out, its copy took
+        // 120 bytes more of this frame, on the deepest stack of a
+        // contaminated fit (the footprint's `adc2-contaminated`).
+        let finished = finish(samples, config, start, est, &mut figures);
+        let done = match &finished {
+            Ok(d) => d,
+            Err(e) => return Err(*e),
+        };
+        let fit = &done.fit;
         let sigma = fit.report.quality.fit_error;
         // Heavy tails: a contamination that broadened every residual, so that
         // none stands out.
@@ -81,7 +88,7 @@ pub(super) fn plain_path<T: Real, S: Sample>(
         if is_clean {
             *route = Route::Plain;
         }
-        Ok(fit)
+        Ok(*fit)
     }
 }
 
