@@ -10,16 +10,21 @@ pub fn path(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// Reads the numeric columns `cols` (0-based) of a CSV or whitespace
-/// separated file, skipping a header line and comments.
-pub fn read_columns(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
+/// The text of the shared recording `name`.
+fn read_text(name: &str) -> String {
     let p = path(name);
-    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
+    std::fs::read_to_string(&p).unwrap_or_else(|e| {
         panic!(
             "cannot read {} ({e}): is ../shared beside the repo?",
             p.display()
         )
-    });
+    })
+}
+
+/// Reads the numeric columns `cols` (0-based) of a CSV or whitespace
+/// separated file, skipping a header line and comments.
+pub fn read_columns(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
+    let text = read_text(name);
     text.lines()
         .filter_map(|line| {
             let fields: Vec<f64> = line
@@ -46,13 +51,7 @@ pub fn read_xyz(name: &str) -> Vec<[f64; 3]> {
 /// columns (as `imu_gnss_1252.csv`): each of the three fields parsed on
 /// its own, rows where one is not a number skipped.
 pub fn read_csv_fields(name: &str, cols: [usize; 3]) -> Vec<[f64; 3]> {
-    let p = path(name);
-    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
-        panic!(
-            "cannot read {} ({e}): is ../shared beside the repo?",
-            p.display()
-        )
-    });
+    let text = read_text(name);
     text.lines()
         .filter_map(|line| {
             let f: Vec<&str> = line.split(',').collect();

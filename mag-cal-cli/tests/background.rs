@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{magcal, read_xyz, real, temp_file, vec3};
+use common::{magcal, read_xyz, real, still_rows, temp_file, vec3};
 use serde_json::Value;
 
 /// Agreement asked of the background calibrator's final calibration with
@@ -91,16 +91,7 @@ fn still_ends_change_nothing_on_icm20948() {
     let (first, last) = (rows[0], rows[rows.len() - 1]);
     // A count of noise: -1, 0, 0 or +1 per axis, from a fixed LCG.
     let mut state = 12_345u32;
-    let mut still = |r: [f64; 3], n: usize| -> Vec<[f64; 3]> {
-        (0..n)
-            .map(|_| {
-                r.map(|v| {
-                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    v + [-1.0, 0.0, 0.0, 1.0][(state >> 30) as usize]
-                })
-            })
-            .collect()
-    };
+    let mut still = |r: [f64; 3], n: usize| still_rows(r, n, 1.0, &mut state);
     for n in [600, 1200] {
         let log: Vec<[f64; 3]> = [still(first, n), rows.clone(), still(last, n)].concat();
         let text: String = log

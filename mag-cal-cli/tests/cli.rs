@@ -5,7 +5,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use common::{magcal_in as magcal, read_xyz, real, temp_file, vec3, Run};
+use common::{magcal_in as magcal, read_xyz, real, still_rows, temp_file, vec3, Run};
 use serde_json::Value;
 
 /// Magneto 1.4's hard iron on `icm20948_mag_300.csv` (after it rejected 10
@@ -2081,16 +2081,7 @@ fn planar_sets_still_ends_aside() {
     let (first, last) = (rows[0], rows[rows.len() - 1]);
     // -0.4, 0, 0 or +0.4 per axis, from a fixed LCG.
     let mut state = 36u32;
-    let mut still = |r: [f64; 3], n: usize| -> Vec<[f64; 3]> {
-        (0..n)
-            .map(|_| {
-                r.map(|v| {
-                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    v + [-0.4, 0.0, 0.0, 0.4][(state >> 30) as usize]
-                })
-            })
-            .collect()
-    };
+    let mut still = |r: [f64; 3], n: usize| still_rows(r, n, 0.4, &mut state);
     let n = 2 * rows.len();
     let log: Vec<[f64; 3]> = [still(first, n), rows.clone(), still(last, n)].concat();
     let text: String = log
@@ -2371,16 +2362,7 @@ fn a_long_disturbance_is_left_out_from_a_window_start() {
 /// and after the turns, as people record.
 fn with_still_ends(rows: &[[f64; 3]], before: usize, after: usize) -> Vec<[f64; 3]> {
     let mut state = 12_345u32;
-    let mut still = |r: [f64; 3], n: usize| -> Vec<[f64; 3]> {
-        (0..n)
-            .map(|_| {
-                r.map(|v| {
-                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    v + [-1.0, 0.0, 0.0, 1.0][(state >> 30) as usize]
-                })
-            })
-            .collect()
-    };
+    let mut still = |r: [f64; 3], n: usize| still_rows(r, n, 1.0, &mut state);
     let (first, last) = (rows[0], rows[rows.len() - 1]);
     [still(first, before), rows.to_vec(), still(last, after)].concat()
 }

@@ -132,6 +132,19 @@ enum StillNoise {
 /// `k` rows of the first row with Gaussian noise `sigma` per axis, the
 /// rows, `k` rows of the last row: each value rounded to a whole number
 /// of counts away from the row it repeats (a sensor's resolution).
+impl StillNoise {
+    /// The noise's sigma for `rec` (whose field is `field`) and its label.
+    fn of(self, rec: &Recording, field: f64) -> (f64, String) {
+        match self {
+            StillNoise::Count => (rec.count, format!("1 count ({})", sig3(rec.count))),
+            StillNoise::Share => (
+                STILL_SHARE * field,
+                format!("{} % ({})", 100.0 * STILL_SHARE, sig3(STILL_SHARE * field)),
+            ),
+        }
+    }
+}
+
 fn with_still_ends(rec: &Recording, k: usize, sigma: f64, rng: &mut Rng) -> Vec<[f64; 3]> {
     let (Some(&first), Some(&last)) = (rec.rows.first(), rec.rows.last()) else {
         return rec.rows.clone();
@@ -256,13 +269,7 @@ fn rows_of(rec: &Recording, seed: u64, out: &mut String) {
         verdict(&without),
     );
     for noise in [StillNoise::Count, StillNoise::Share] {
-        let (sigma, label) = match noise {
-            StillNoise::Count => (rec.count, format!("1 count ({})", sig3(rec.count))),
-            StillNoise::Share => (
-                STILL_SHARE * field,
-                format!("{} % ({})", 100.0 * STILL_SHARE, sig3(STILL_SHARE * field)),
-            ),
-        };
+        let (sigma, label) = noise.of(rec, field);
         for mult in MULTIPLES.into_iter().filter(|&m| m > 0) {
             let k = mult * n;
             let mut rng =
@@ -440,13 +447,7 @@ fn planar_rows(out: &mut String) -> Shift {
     };
     let seed = 0x5712_0000;
     for noise in [StillNoise::Count, StillNoise::Share] {
-        let (sigma, label) = match noise {
-            StillNoise::Count => (rec.count, format!("1 count ({})", sig3(rec.count))),
-            StillNoise::Share => (
-                STILL_SHARE * field,
-                format!("{} % ({})", 100.0 * STILL_SHARE, sig3(STILL_SHARE * field)),
-            ),
-        };
+        let (sigma, label) = noise.of(&rec, field);
         let share = u64::from(matches!(noise, StillNoise::Share));
         for mult in MULTIPLES.into_iter().filter(|&m| m > 0) {
             let k = mult * n;

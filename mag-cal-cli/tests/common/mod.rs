@@ -112,3 +112,17 @@ pub fn vec3(v: &Value) -> [f64; 3] {
     assert_eq!(a.len(), 3);
     [0, 1, 2].map(|i| a[i].as_f64().expect("number"))
 }
+
+/// `n` readings of a device lying still at `r`: each axis plus `-step`,
+/// 0, 0 or `+step`, from a fixed LCG whose `state` goes on from call to
+/// call (a sensor's noise of about a count).
+pub fn still_rows(r: [f64; 3], n: usize, step: f64, state: &mut u32) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|_| {
+            r.map(|v| {
+                *state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                v + [-step, 0.0, 0.0, step][(*state >> 30) as usize]
+            })
+        })
+        .collect()
+}

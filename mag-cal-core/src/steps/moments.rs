@@ -141,7 +141,7 @@ impl<T: Real> Moments<T> {
         stride: usize,
     ) -> Self {
         // A plain gate's rows (clean data) take the plain copy of the
-        // loops: 148 bytes of flash for about 90 000 instructions less on
+        // loops: 148 bytes of flash for about 65 000 instructions less on
         // 1 000 rows, which every fit's first moments pass saves (the 10 %
         // contaminated kinds stay under 2.0 M: `robust-spike` 2 007 520
         // without it; `bash bench.sh flash` and `bench`). Without the
