@@ -160,9 +160,10 @@
 //!
 //! Steps 2-4 are the cargo feature `robust` (default). Without it (an
 //! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
-//! takes about 19 KB of flash instead of 32 KB and 3.1 KB of stack, but
-//! more instructions on clean samples (651 640 against 472 160 at
-//! `7618f79`, when last measured), as each pass keeps its gated loop only)
+//! takes about 20 KB of flash instead of 33 KB and 2.9 KB of stack instead
+//! of 3.8 KB, `cd firmware-example && bash bench.sh footprint`; each pass
+//! keeps its gated loop only, and its instructions are not counted, as the
+//! bench needs `robust`)
 //! only the plain pipeline is
 //! compiled: step 1's
 //! rules, then the plain fit, whose answer, a calibration or a refusal,
@@ -195,11 +196,12 @@
 //! # Cost
 //!
 //! LS9 + ADC2 on 1000 `[i16; 3]` samples in `f32` on a Cortex-M4F: about
-//! 466 000 instructions on clean samples (two passes over the samples for
-//! the fit, one for the scan and one for the figures); 0.8-1.8 M on samples
-//! with 10 % of the rows contaminated, and about 7.8 M when a result in
+//! 626 000 instructions on clean samples (two passes over the samples for
+//! the fit, one for the scan and one for the figures); 0.9-1.9 M on samples
+//! with 10 % of the rows contaminated, and about 8.1 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
-//! 32 KB of flash and 4 KB of stack. A [`Config`] known at compile time links only its method and LS
+//! 33 KB of flash and 3.8 KB of stack (`cd firmware-example && bash
+//! bench.sh all`). A [`Config`] known at compile time links only its method and LS
 //! variant.
 //!
 //! # Features
