@@ -65,7 +65,14 @@
 //!    and with outlier handling `(0, 0, 0)`, an axis on the integer rails,
 //!    a row equal to the one before, an axis at a clip level. The rest are
 //!    centred and scaled, `x = (y - c) / s`, so that nothing cancels in
-//!    `f32` at offsets of tens of thousands of counts.
+//!    `f32` at offsets of tens of thousands of counts. In the same pass,
+//!    **still periods** ([`Config::still`]): a time run of rows within six
+//!    noise sigmas of its moving average (the noise from the rows' second
+//!    differences), holding a tenth of the rows, is a device lying still;
+//!    its ball ([`Dwell`], at most 3) is set aside in every later pass, so
+//!    that a log that starts and ends still calibrates like its motion
+//!    ([`SampleClass::Dwell`], [`Report::dwell`]; too few rows left:
+//!    [`Error::HardlyMoved`]).
 //! 2. **LS ellipsoid fit**: the quadric `x^T A x + g^T x = 1` through the
 //!    normalised samples by algebraic least squares on 35 moments summed
 //!    in one pass ([`LsVariant::Ls9`]; also the smallest eigenvector of
