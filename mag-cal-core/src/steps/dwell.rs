@@ -274,7 +274,9 @@ impl<T: Real> Tracker<T> {
                 ];
                 let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).square_root();
                 let r0 = last.radius_sq.square_root();
-                let meets = dist < r0;
+                // The new centre in the earlier ball, or the new ball
+                // holding the earlier.
+                let meets = dist < r0 || dist + r0 <= r;
                 let wide = (dist + r0 + r) * T::lit(0.5);
                 // The new ball holds the earlier (`t` 1), or neither holds
                 // the other (then `dist > 0`: `wide > r0` and `dist + r0 >
