@@ -40,8 +40,13 @@ pub(super) fn method_step<T: Real, S: Sample>(
     step: methods::Step<T, S>,
     figures: &Figures<T>,
 ) -> Result<methods::Estimate<T>, Error> {
-    step(samples, &start.norm, &start.ls, config, &start.weights)
-        .map_err(|e| judge_failure(figures, config, e))
+    // The step's answer is returned as it came, an error replaced in place:
+    // mapped (`map_err`), a copy of it made this frame 164 bytes instead
+    // of 48 with the method chosen at run time, under the method's passes.
+    match step(samples, &start.norm, &start.ls, config, &start.weights) {
+        Err(e) => Err(judge_failure(figures, config, e)),
+        est => est,
+    }
 }
 
 /// The final pass after the method's estimate `est`, and the judging.

@@ -52,44 +52,60 @@ pub(super) fn plain_path<T: Real, S: Sample>(
     #[cfg(not(feature = "robust"))]
     return finish(samples, config, start, est, &mut figures);
     #[cfg(feature = "robust")]
-    {
-        if est.beyond_tails_limit {
-            // The method's first pass found heavy tails, or rows pulled
-            // inwards (only with outlier handling, which sets the limit).
-            return Err(NOT_TAKEN);
-        }
-        let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
-        let method_clean = est
-            .max_residual
-            .zip(est.sigma)
-            .is_none_or(|(m, s)| clean_limit(m, s));
-        if config.robust && !method_clean {
-            // Not clean, and this fit will not be returned: no final pass
-            // (about 120 instructions a row on a Cortex-M4F).
-            return Err(NOT_TAKEN);
-        }
-        // The finished fit too, read in place: moved out, its copy took
-        // 120 bytes more of this frame, on the deepest stack of a
-        // contaminated fit (the footprint's `adc2-contaminated`).
-        let finished = finish(samples, config, start, est, &mut figures);
-        let done = match &finished {
-            Ok(d) => d,
-            Err(e) => return Err(*e),
-        };
-        let fit = &done.fit;
-        let sigma = fit.report.quality.fit_error;
-        // Heavy tails: a contamination that broadened every residual, so that
-        // none stands out.
-        let is_clean = method_clean
-            && clean_limit(done.final_max, sigma)
-            && !done.heavy_tails
-            && !done.misfit
-            && !done.misshapen;
-        if is_clean {
-            *route = Route::Plain;
-        }
-        Ok(*fit)
+    plain_rest(samples, config, start, est, &mut figures, route)
+}
+
+/// The plain path after the method, with outlier handling: the final pass
+/// and whether the fit is clean (`route`). Out of line, as the robust
+/// path's [`finish_fit`](super::robust::finish_fit): the finished fit,
+/// read in place in its `Result`, then takes stack in this frame only, not
+/// in [`plain_path`]'s while the method runs. Inlined there, with the
+/// finished fit taken out by `?`, [`plain_path`]'s frame was 1 088 bytes
+/// instead of 528 with the method chosen at run time (this one's: 320),
+/// and LS9 + ADC2 took 20 bytes of flash more (31 664 -> 31 684, `bash
+/// bench.sh flash`).
+#[cfg(feature = "robust")]
+#[inline(never)]
+fn plain_rest<T: Real, S: Sample>(
+    samples: &[S],
+    config: &Config,
+    start: &Start<T>,
+    est: &methods::Estimate<T>,
+    figures: &mut Figures<T>,
+    route: &mut Route,
+) -> Result<Fit<T>, Error> {
+    if est.beyond_tails_limit {
+        // The method's first pass found heavy tails, or rows pulled
+        // inwards (only with outlier handling, which sets the limit).
+        return Err(NOT_TAKEN);
     }
+    let clean_limit = |max: T, sigma: T| max <= sigma * T::lit(CLEAN_LIMIT);
+    let method_clean = est
+        .max_residual
+        .zip(est.sigma)
+        .is_none_or(|(m, s)| clean_limit(m, s));
+    if config.robust && !method_clean {
+        // Not clean, and this fit will not be returned: no final pass
+        // (about 120 instructions a row on a Cortex-M4F).
+        return Err(NOT_TAKEN);
+    }
+    let done = finish(samples, config, start, est, figures);
+    let done = match &done {
+        Ok(d) => d,
+        Err(e) => return Err(*e),
+    };
+    let sigma = done.fit.report.quality.fit_error;
+    // Heavy tails: a contamination that broadened every residual, so that
+    // none stands out.
+    let is_clean = method_clean
+        && clean_limit(done.final_max, sigma)
+        && !done.heavy_tails
+        && !done.misfit
+        && !done.misshapen;
+    if is_clean {
+        *route = Route::Plain;
+    }
+    Ok(done.fit)
 }
 
 /// The plain path up to the method: the moments and the LS fit, and the
