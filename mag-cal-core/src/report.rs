@@ -34,9 +34,9 @@ pub struct Report<T: Real> {
     pub samples_dropped: usize,
     /// Rows dropped by each rule.
     pub drops: Drops,
-    /// Rows kept by the rules but set aside as still periods beyond their
-    /// first rows ([`crate::Dwell`], [`crate::SampleClass::Dwell`]):
-    /// not outliers, and not counted by the outlier share.
+    /// Rows kept by the rules but set aside in a still period's ball
+    /// ([`crate::Dwell`], [`crate::SampleClass::Dwell`]): not outliers,
+    /// and not counted by the outlier share.
     pub dwell: usize,
     /// Rows kept by the rules but screened out: too far from the others.
     pub screened: usize,

@@ -443,7 +443,10 @@ pub(crate) const PRIOR_WEIGHT: f32 = 0.001;
 /// rows. Guards: the noise of the still period itself, not of the motion
 /// before it, sets the radius of its run.
 ///
-/// Set at `1e1b99f` (branch `still`, the host prototype). Evidence:
+/// Set at `1e1b99f` (branch `still`, a host prototype, not on main).
+/// Today's rule checked by `cargo test --release -p host-tests --test
+/// still_periods -- --nocapture` (worst b 0.199 %, field 0.057 %, M
+/// 0.415 %). The prototype's evidence:
 /// `LOCAL=1 L0=16 K0=4 SHARE=48 cargo run --release -p host-tests --bin
 /// still-probe -- 6 runs` on the shared recordings with still ends of
 /// 0.5x-10x the motion, noise 1 count to 3 % of the field: no refusal, b
@@ -474,16 +477,17 @@ pub(crate) const DWELL_NOISE: f64 = 1.955;
 /// period (a 3-D Gaussian row beyond 6 sigma: 1e-7), and a device that
 /// moves by more than the noise between rows is not still.
 ///
-/// Set at `1e1b99f`. Evidence: the `still-probe` command of [`DWELL_EMA`]
-/// (radius 6 its first argument; 4 split the noisier still ends).
+/// Set at `1e1b99f` with the prototype of [`DWELL_EMA`] (its `still-probe`
+/// command: radius 6 its first argument; 4 split the noisier still ends);
+/// today's rule checked as [`DWELL_EMA`].
 pub(crate) const DWELL_RADIUS: f64 = 6.0;
 /// A run of at least this many rows is a still period. Guards: a slow
 /// turn's runs of a few rows are not set aside (every shared recording as
 /// it is: none set aside).
 ///
-/// Set at `1e1b99f`. Evidence: the `still-probe` command of
-/// [`DWELL_EMA`] (`L0=16`); `cargo run --release -p host-tests --bin
-/// still-stats` (runs of the shared recordings).
+/// Set at `1e1b99f` with the prototype of [`DWELL_EMA`] (`L0=16`; its
+/// `still-stats` command gave the runs of the shared recordings); today's
+/// rule checked as [`DWELL_EMA`] (none of a recording as it is set aside).
 pub(crate) const DWELL_MIN_RUN: usize = 16;
 /// A run is a still period only when it holds at least a `DWELL_SHARE`-th
 /// of the recording's rows. Guards: a short pause in a long recording,
@@ -506,11 +510,13 @@ pub(crate) const DWELL_SHARE: usize = 10;
 /// inflated (displaced rows). Still ends of 10x the motion at 3 % noise:
 /// about 0.6 spreads at worst, 0.2-0.4 mostly.
 ///
-/// Set with issue 36's core rule. Evidence: `cargo run --release -p
-/// host-tests --bin contamination-table -- 64`: robust ADC2 f32 runs
-/// silently wrong 15 (main) -> 55 at 1.0 (displace-1 20-30 %), 28 at 0.5,
-/// 19 at 0.35, 16 at 0.25 (mostly clip 30 %: an open question); `cargo
-/// test --release -p host-tests --test still_periods`: passes at 0.35 and
-/// above, at 0.25 `icm20948_mag_300.csv` with still ends of 5x at 3 %
-/// noise is refused (NoSphere 0.43).
+/// Set with issue 36's first (span) rule at `89d7ee4`, by `cargo run
+/// --release -p host-tests --bin contamination-table -- 64`: robust ADC2
+/// f32 runs silently wrong 15 (main) -> 55 at 1.0 (displace-1 20-30 %),
+/// 28 at 0.5, 19 at 0.35, 16 at 0.25; and `cargo test --release -p
+/// host-tests --test still_periods`: passes at 0.35 and above, at 0.25
+/// `icm20948_mag_300.csv` with still ends of 5x at 3 % noise is refused
+/// (NoSphere 0.43). With today's ball rule at 0.35 every robust count of
+/// the contamination table equals main's (silently wrong 15/16, 11/9,
+/// 15/16; `core-dwell` `c800cd3`).
 pub(crate) const DWELL_SCALE: f64 = 0.35;

@@ -186,7 +186,7 @@ pub struct PlanarConfig {
     /// [`PlanarReport::dwell`], not outliers), so that a log that starts
     /// and ends lying still calibrates like its turns alone; too few rows
     /// left is refused as [`crate::Error::HardlyMoved`]. `false` fits
-    /// every row the rules keep, as before the rule existed.
+    /// every row the rules keep.
     pub still: bool,
 }
 
@@ -431,7 +431,7 @@ pub fn calibrate_planar<T: Real, S: Sample>(
         screen: Some(screening.ball),
         dwell: scanned.dwell,
     };
-    let mut passes = SCAN_PASSES + screening.passes;
+    let mut passes = SCAN_PASSES + u32::from(!scanned.dwell.is_empty()) + screening.passes;
     let norm = screening.norm;
     let (c, m, inv_m) = (
         [norm.centre.x, norm.centre.y, norm.centre.z],
@@ -670,7 +670,9 @@ impl<T: Real> FigureSums<T> {
     }
 }
 
-/// Passes of the rules' scan (the drop count and the moments).
+/// Passes of the rules' scan: the drop count and the sums (with still
+/// periods set aside, one more without their rows, counted; the guard's
+/// second when it leaves a ball out is not).
 const SCAN_PASSES: u32 = 2;
 
 /// The rows a pass visits, in normalised coordinates `(y - c) / m`.

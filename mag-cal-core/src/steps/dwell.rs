@@ -20,8 +20,9 @@
 //!   [`DWELL_EMA`]) of the run's rows; a row farther starts a new run;
 //! - a run of at least a [`DWELL_SHARE`](crate::tuning::DWELL_SHARE)-th of the rows (and
 //!   [`DWELL_MIN_RUN`]) leaves a ball: about the run's moving average at
-//!   its end, of [`DWELL_RADIUS`] times its rows' mean sigma. At most
-//!   [`DWELL_SPANS`], the first.
+//!   its end, of [`DWELL_RADIUS`] times its rows' mean sigma; a run whose
+//!   centre lies in the last ball (or whose ball holds it) widens that
+//!   ball to hold both instead. At most [`DWELL_SPANS`] balls, the first.
 //!
 //! After the scan's sums ([`Tracker::finish`], [`Dwell::keep_within`]), a
 //! ball whose radius is below [`DWELL_SCALE`](crate::tuning::DWELL_SCALE)
@@ -48,10 +49,18 @@ use crate::tuning::{DWELL_CLIP, DWELL_EMA, DWELL_MIN_RUN, DWELL_NOISE, DWELL_RAD
 use crate::Real;
 
 /// The noise's average starts at the smallest of this many second
-/// differences above zero (a spike spoils three).
+/// differences above zero (a spike spoils three). Evidence: `cargo test
+/// --release -p host-tests --test still_planar
+/// a_spike_among_the_first_rows_sets_nothing_aside` (with the first alone,
+/// `icm20948_mag_300.csv` with a spike at row 1 was refused PoorCoverage).
 const DWELL_SEED: u8 = 4;
 
-/// At most this many still periods are set aside: the first.
+/// At most this many still periods are set aside: the first. Three: still
+/// before, between and after the motion (`cargo test --release -p
+/// host-tests --test still_periods
+/// one_still_period_before_after_or_between_leaves_the_fit`); each ball is
+/// 16 bytes of `f32` in every frame that holds a `Dwell` (two on the
+/// fit's deepest stack).
 pub const DWELL_SPANS: usize = 3;
 
 /// The still periods set aside: a ball (sensor units) about each, and the

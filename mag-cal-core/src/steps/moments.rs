@@ -142,10 +142,11 @@ impl<T: Real> Moments<T> {
     ) -> Self {
         // A plain gate's rows (clean data) take the plain copy of the
         // loops: 148 bytes of flash for about 65 000 instructions less on
-        // 1 000 rows, which every fit's first moments pass saves (the 10 %
-        // contaminated kinds stay under 2.0 M: `robust-spike` 2 007 520
-        // without it; `bash bench.sh flash` and `bench`). Without the
-        // `robust` feature, the gated loops alone.
+        // 1 000 rows, on the first moments pass of a fit whose scan dropped
+        // no row and found no still period (the 10 % contaminated kinds stay
+        // under 2.0 M: `robust-spike` 2 007 520 without it; `bash bench.sh
+        // flash` and `bench`). Without the `robust` feature, the gated loops
+        // alone.
         if cfg!(feature = "robust") && gate.is_plain() && cut.is_none() && stride <= 1 {
             return Self::accumulate(samples, norm);
         }

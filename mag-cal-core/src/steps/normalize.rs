@@ -85,8 +85,8 @@ pub(crate) fn scan<T: Real, S: Sample>(
 }
 
 /// [`scan`] that, given `still`, also sets the still periods aside
-/// ([`crate::Dwell`], written there: one pass more, over the rows the
-/// rules keep).
+/// ([`crate::Dwell`], written there): when the sums' pass found one, one
+/// pass more without their rows (two when the guard leaves a ball out).
 pub(crate) fn scan_still<'d, T: Real, S: Sample>(
     samples: &[S],
     glitches: bool,

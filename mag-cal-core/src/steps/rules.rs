@@ -291,9 +291,10 @@ impl<'d, T: Real> Gate<'d, T> {
     /// Cortex-M4F: 47 312 -> 42 616 bytes of flash, `bench.sh footprint`),
     /// for about 10 instructions a gated row more (LS9 + ADC2, n = 1000,
     /// a tenth of the rows displaced: 1.56 M -> 1.70 M instructions).
-    /// Clean data pay it too: the moments' and the final pass's loops have
-    /// no plain copy (LS9 + ADC2 232 bytes less flash, clean `adc2` about
-    /// 1.5 x the instructions, `bash bench.sh flash` and `bench`).
+    /// Clean data pay it in the final pass, which has no plain copy of its
+    /// loop (84 bytes of flash for about 41 000 instructions on 1 000
+    /// clean rows, `bash bench.sh flash` and `bench`); the moments have
+    /// one ([`Moments::accumulate_every`](crate::steps::moments::Moments::accumulate_every)).
     #[inline(always)]
     pub(crate) fn pass<S: Sample>(&self, sample: &S, prev: Option<&S>) -> Option<[T; 3]> {
         self.admit(sample, prev).ok()
