@@ -168,7 +168,7 @@
 //! Steps 2-4 are the cargo feature `robust` (default). Without it (an
 //! opt-in for parts where flash decides: LS9 + ADC2 on a Cortex-M4F then
 //! takes about 20 KB of flash instead of 33 KB and 2.9 KB of stack instead
-//! of 3.8 KB, `cd firmware-example && bash bench.sh footprint`; each pass
+//! of 3.5 KB, `cd firmware-example && bash bench.sh footprint`; each pass
 //! keeps its gated loop only, and its instructions are not counted, as the
 //! bench needs `robust`)
 //! only the plain pipeline is
@@ -207,7 +207,7 @@
 //! the fit, one for the scan and one for the figures); 0.9-1.9 M on samples
 //! with 10 % of the rows contaminated, and about 8.1 M when a result in
 //! doubt runs the window starts (a third of the rows displaced); about
-//! 33 KB of flash and 3.8 KB of stack (`cd firmware-example && bash
+//! 33 KB of flash and 3.5 KB of stack (`cd firmware-example && bash
 //! bench.sh all`). A [`Config`] known at compile time links only its method and LS
 //! variant.
 //!
