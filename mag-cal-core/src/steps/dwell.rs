@@ -28,10 +28,9 @@
 //! ball whose radius is below [`DWELL_SCALE`](crate::tuning::DWELL_SCALE)
 //! times the rows' spread (or the spread of the rows outside the balls,
 //! when larger: a long still period on one side shrinks the spread of all
-//! rows) is a still period. The
-//! spread guards rows that are not in time order (a shuffled or
-//! interleaved recording): their second differences are as large as their
-//! spread, and every row would lie in one run.
+//! rows) is a still period. The spread guards rows that are not in time
+//! order (a shuffled or interleaved recording): their second differences
+//! are as large as their spread, and every row would lie in one run.
 //!
 //! The rule is then a pure function of the row: a row inside a still
 //! period's ball is set aside ([`Dwell::holds`]), in every pass, as the
@@ -255,10 +254,11 @@ impl<T: Real> Tracker<T> {
     /// noise (the noise at its end is a still period's last rows alone: a
     /// quiet end of a noisy period left most of it outside).
     ///
-    /// A ball whose centre lies in the one kept last widens it instead
-    /// (one still period split into runs, by a glitch or a quantised
-    /// reading, takes one slot): that ball grows to hold the new one. A new period found when every slot is taken is
-    /// left in the fit.
+    /// A ball whose centre lies in the one kept last (or that holds it)
+    /// merges with it instead (one still period split into runs, by a
+    /// glitch or a quantised reading, takes one slot): that ball becomes
+    /// the smallest that holds both. A new period found when every slot is
+    /// taken is left in the fit.
     #[inline(never)]
     fn close(&mut self) {
         if self.kept < self.long {
@@ -270,12 +270,12 @@ impl<T: Real> Tracker<T> {
         let found = &mut self.found;
         let merged = match found.balls.get_mut(usize::from(found.len).wrapping_sub(1)) {
             Some(last) => {
-                // The new centre in the earlier ball: that ball becomes the
-                // smallest that holds both (a ball about the earlier
-                // centre, as wide as needed, took too many moving rows:
-                // `planar_243.txt` with still ends of 2x at 3 % noise, K'K
-                // 1.03 %, `cargo test --release -p host-tests --test
-                // still_planar`).
+                // The new centre in the earlier ball, or the new ball
+                // holding it: that ball becomes the smallest that holds
+                // both (a ball about the earlier centre, as wide as needed,
+                // took too many moving rows: `planar_243.txt` with still
+                // ends of 2x at 3 % noise, K'K 1.03 %, `cargo test
+                // --release -p host-tests --test still_planar`).
                 let d = [
                     c[0] - last.centre[0],
                     c[1] - last.centre[1],
@@ -283,24 +283,23 @@ impl<T: Real> Tracker<T> {
                 ];
                 let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).square_root();
                 let r0 = last.radius_sq.square_root();
-                // The new centre in the earlier ball, or the new ball
-                // holding the earlier.
-                let meets = dist < r0 || dist + r0 <= r;
-                let wide = (dist + r0 + r) * T::lit(0.5);
-                // The new ball holds the earlier (`t` 1), or neither holds
-                // the other (then `dist > 0`: `wide > r0` and `dist + r0 >
-                // r`), or the earlier holds the new (unchanged).
-                let t = if dist + r0 <= r {
-                    T::one()
-                } else {
-                    (wide - r0) / dist
-                };
-                if meets && wide > r0 {
-                    for (a, da) in last.centre.iter_mut().zip(d) {
-                        *a += da * t;
+                let holds_last = dist + r0 <= r;
+                let meets = dist < r0 || holds_last;
+                if holds_last {
+                    // The new ball holds the earlier: it takes its place.
+                    last.centre = c;
+                    last.radius_sq = r * r;
+                } else if meets {
+                    // Neither holds the other (`wide > r0`, then `dist >
+                    // 0`), or the earlier holds the new (unchanged).
+                    let wide = (dist + r0 + r) * T::lit(0.5);
+                    if wide > r0 {
+                        let t = (wide - r0) / dist;
+                        for (a, da) in last.centre.iter_mut().zip(d) {
+                            *a += da * t;
+                        }
+                        last.radius_sq = wide * wide;
                     }
-                    let wide = if dist + r0 <= r { r } else { wide };
-                    last.radius_sq = wide * wide;
                 }
                 meets
             }
