@@ -231,11 +231,10 @@ pub(crate) fn scan_still<'d, T: Real, S: Sample>(
     // Per component, as `point_back`.
     let mean = [sum[0] / n, sum[1] / n, sum[2] / n];
     let centre = Vector3::new(o[0] + mean[0], o[1] + mean[1], o[2] + mean[2]);
-    let mean_sq = sum_sq / n;
-    let mut var = mean_sq - (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+    let mut var = sums.variance();
     // Catastrophic cancellation: y0 lies far outside the cloud (a wild first
     // sample). Recompute the spread around the mean; this path is rare.
-    if !(var > mean_sq * T::lit(1e-2)) {
+    if !(var > sum_sq / n * T::lit(1e-2)) {
         var = spread_about(samples, &centre, &gate) / n;
     }
     // Refuse spreads whose squares overflow, or that are so small that their
@@ -281,7 +280,8 @@ struct Sums<T> {
 }
 
 impl<T: Real> Sums<T> {
-    /// The mean squared distance of the rows from their mean.
+    /// The mean squared distance of the rows from their mean (the guard's
+    /// spreads and the scale). Out of line: three callers.
     #[inline(never)]
     fn variance(&self) -> T {
         let n = T::from_count(self.used);
@@ -296,8 +296,8 @@ impl<T: Real> Sums<T> {
 /// loop of [`scan`], on scalars and on its own (not inlined), so that
 /// nothing of the caller competes for its registers. Every row goes
 /// through [`Gate::pass`], a plain gate's too: the inline conversion of
-/// a plain gate's rows took 64 bytes of flash more (LS9 + ADC2, branch
-/// `core-dwell`) for about 39 instructions a row less.
+/// a plain gate's rows took 64 bytes of flash more (LS9 + ADC2 at
+/// `aa811ae`, `bash bench.sh flash`) for about 39 instructions a row less.
 #[inline(never)]
 fn sums_about<T: Real, S: Sample>(
     samples: &[S],

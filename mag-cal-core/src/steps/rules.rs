@@ -197,7 +197,8 @@ impl<T: Real> Rules<T> {
 /// The components of `sample` in precision `T`, or the rule that drops it.
 /// `prev` is the row before it in the slice (`None` for the first). The
 /// glitch rules compare the raw row (integer compares for integer
-/// samples) before it is converted.
+/// samples) before it is converted. The clip levels are not applied here
+/// ([`Rules::clipped`]: after the still balls).
 #[inline(always)]
 pub(crate) fn check<T: Real, S: Sample>(
     sample: &S,
@@ -603,9 +604,9 @@ pub(crate) fn count_drops<T: Real, S: Sample>(
         }
         return drops;
     }
-    // Through the gate's out-of-line check, no ball: no second copy of
-    // the rules for this loop (it runs with clip levels or on
-    // floating-point rows).
+    // Through the gate's out-of-line check, no screening ball (the still
+    // balls' rows are no drops): no second copy of the rules for this loop
+    // (it runs with clip levels or on floating-point rows).
     let gate = Gate::of(*rules, dwell);
     for s in samples {
         if let Err(Some(rule)) = gate.admit(s, prev) {
